@@ -1,0 +1,396 @@
+"""C3D files: read into a Take, write a Take.
+
+Reading: the ``c3d`` package parses the header and parameter section (it is lazy and knows
+Intel, DEC and MIPS files); the data block is read here with numpy, chunk by chunk, because
+ezc3d holds every sample as a C++ object (about 11x the positions' size in memory) and
+stops at 65,535 frames. A damaged parameter section (a last parameter that does not end
+the section, dimensions that overflow their own record) is repaired in memory first.
+
+Writing: ezc3d, the reference implementation; the output round-trips through ezc3d and
+``c3d``.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import struct
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..atomic import atomic_output
+from ..errors import MocapInputError
+from ..take import Take, mark_missing, unit_scale
+
+BLOCK = 512
+MAGIC = 0x50
+#: Frames converted per chunk: bounds the temporary memory of a read.
+CHUNK_FRAMES = 8192
+#: More point slots than this is not a capture, it is a corrupt header.
+MAX_POINTS = 65535
+
+
+@dataclass
+class _Layout:
+    """Where and how the samples are stored in the data block."""
+
+    processor: str
+    is_real: bool
+    scale: float
+    n_points: int
+    analog_words: int
+    data_offset: int
+    n_frames: int
+
+    @property
+    def frame_words(self) -> int:
+        return 4 * self.n_points + self.analog_words
+
+    @property
+    def word_bytes(self) -> int:
+        return 4 if self.is_real else 2
+
+
+def read_c3d(path: str | os.PathLike) -> Take:
+    """Read a C3D file into a Take; positions in metres, NaN where missing.
+
+    Raises:
+        MocapInputError: empty, truncated, not a C3D file, or a parameter section that
+            cannot be repaired.
+    """
+    path = os.fspath(path)
+    size = os.path.getsize(path)
+    if size == 0:
+        raise MocapInputError(path, "file is empty (0 bytes)")
+    with open(path, "rb") as fh:
+        head = fh.read(BLOCK)
+        if len(head) < BLOCK or head[1] != MAGIC:
+            raise MocapInputError(path, "not a C3D file (no C3D header signature in the first 512 bytes)")
+        param_start = (head[0] - 1) * BLOCK
+        if head[0] < 2 or param_start + 4 > size:
+            raise MocapInputError(
+                path, f"the header points to a parameter section at byte {param_start}, "
+                f"outside the file ({size} bytes)")
+        fh.seek(param_start)
+        param_head = fh.read(4)
+        n_param_blocks = param_head[2] or 1
+        fh.seek(0)
+        reader, fixes = _parse_metadata(path, fh.read(param_start + n_param_blocks * BLOCK))
+        layout = _layout(path, reader, size)
+        positions, residuals = _read_samples(fh, layout)
+
+    units = _string_param(reader, "POINT:UNITS")
+    take_warnings = [f"repaired parameter section: {fix}" for fix in fixes]
+    if not units:
+        units = "mm"
+        take_warnings.append("no POINT:UNITS parameter; assuming millimetres")
+    scale_m = unit_scale(units, path)
+    positions *= scale_m
+    residuals *= scale_m
+
+    names = _point_labels(reader, layout.n_points)
+    if layout.n_points == 0:
+        take_warnings.append("the file holds no 3D points (analog data only)")
+    dupes = sorted({n for n in names if n and names.count(n) > 1})
+    if dupes:
+        take_warnings.append(f"duplicate point names: {', '.join(dupes[:5])}" + (" ..." if len(dupes) > 5 else ""))
+
+    rate = _point_rate(reader)
+    if not rate > 0:
+        raise MocapInputError(path, "no usable frame rate (POINT:RATE and the header rate are 0)")
+    return Take(
+        positions=positions,
+        names=names,
+        rate=rate,
+        first_frame=int(reader.header.first_frame),
+        source_units=units,
+        residuals=residuals,
+        source=path,
+        vendor=_vendor(reader, layout),
+        warnings=take_warnings,
+    )
+
+
+def rebuild_parameter_section(meta: bytes) -> tuple[bytes, list[str]]:
+    """Rebuild a damaged parameter section so that a standard parser reads it.
+
+    ``meta`` holds the header and the whole parameter section. Records are walked by their
+    "next" offsets (the part of a damaged file that is usually still right) and written
+    back in standard form. Damage seen in real files and repaired here:
+    - dimensions that describe more bytes than the record holds (a stray extra dimension);
+    - a record that ends before its description-length byte;
+    - a numeric parameter with no value at all (dropped: the header's value is used);
+    - a last record that points to a zero-filled record instead of ending the section.
+
+    Returns the rebuilt bytes and a list of what was repaired.
+    """
+    start = (meta[0] - 1) * BLOCK
+    endian = ">" if meta[start + 3] == 86 else "<"
+    end = min(start + meta[start + 2] * BLOCK, len(meta))
+    records: list[bytes] = []
+    fixes: list[str] = []
+    pos = start + 4
+    while pos + 4 <= end:
+        n_chars, group_id = struct.unpack_from("bb", meta, pos)
+        if n_chars == 0 or group_id == 0:
+            break
+        name_end = pos + 2 + abs(n_chars)
+        name = meta[pos + 2:name_end].decode("latin-1").strip()
+        offset = struct.unpack_from(endian + "h", meta, name_end)[0]
+        body_end = name_end + offset if offset > 0 else end
+        body = bytearray(meta[name_end + 2:min(body_end, end)])
+        if group_id > 0:
+            body, fix = _normalise_parameter(body)
+            if fix:
+                fixes.append(f"{name}: {fix}")
+            if body is None:
+                pos = body_end
+                continue
+        elif not body:
+            body = bytearray(1)  # a group with no description-length byte
+        records.append(struct.pack("bb", n_chars, group_id) + meta[pos + 2:name_end]
+                       + struct.pack(endian + "h", len(body) + 2) + bytes(body))
+        if offset <= 0:
+            break
+        pos = body_end
+    section = bytearray(meta[start:start + 4]) + b"".join(records) + bytes(2)
+    n_blocks = -(-len(section) // BLOCK)
+    section[2] = n_blocks
+    section += bytes(n_blocks * BLOCK - len(section))
+    return bytes(meta[:start]) + bytes(section), fixes
+
+
+def _normalise_parameter(body: bytearray) -> tuple[bytearray | None, str]:
+    """One parameter record (after its offset field) in standard form, and what was wrong."""
+    if len(body) < 2:
+        return None, "record too short, dropped"
+    type_size = abs(struct.unpack_from("b", body, 0)[0])
+
+    def data_end(n_dims: int) -> int:
+        dims = list(body[2:2 + n_dims])
+        return 2 + n_dims + type_size * int(np.prod(dims, dtype=np.int64))
+
+    fix = ""
+    n_dims = body[1]
+    if data_end(n_dims) > len(body):
+        fitting = [n for n in range(n_dims - 1, 0, -1) if data_end(n) <= len(body)]
+        if not fitting:
+            return None, "dimensions larger than the record, dropped"
+        n_dims, fix = fitting[0], "dimensions larger than the record"
+        body[1] = n_dims
+    stop = data_end(n_dims)
+    if type_size != 1 and stop == 2 + n_dims:
+        return None, "numeric parameter without a value, dropped"
+    if stop >= len(body):
+        return body[:stop] + bytes(1), fix or "no description-length byte"
+    return body, fix
+
+
+def _parse_metadata(path: str, meta: bytes):
+    """The ``c3d`` package's Reader over header + parameters, rebuilding them if damaged."""
+    import c3d as c3dpkg
+
+    class LenientReader(c3dpkg.Reader):
+        # Header and parameters often disagree in real files; _layout decides which to trust.
+        def _check_metadata(self) -> None:
+            pass
+
+    def parse(data: bytes):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return LenientReader(io.BytesIO(data))
+
+    try:
+        return parse(meta), []
+    except Exception:  # the c3d package raises bare struct/Value/Assertion errors
+        pass
+    try:
+        rebuilt, fixes = rebuild_parameter_section(meta)
+        return parse(rebuilt), fixes
+    except Exception as exc:
+        raise MocapInputError(path, f"damaged parameter section that cannot be repaired ({exc})") from None
+
+
+def _param(reader, key: str):
+    try:
+        return reader.get(key)
+    except Exception:
+        return None
+
+
+def _string_param(reader, key: str) -> str:
+    p = _param(reader, key)
+    if p is None:
+        return ""
+    try:
+        value = p.string_value if len(p.dimensions) <= 1 else " ".join(p.string_array.ravel())
+    except Exception:
+        return ""
+    return str(value).strip().strip("\x00").strip()
+
+
+def _number_param(reader, key: str) -> float | None:
+    """A numeric parameter's first value, whatever its stored type; None if absent."""
+    p = _param(reader, key)
+    if p is None or p.total_bytes == 0:
+        return None
+    try:
+        if p.bytes_per_element == 4:
+            return float(p.float_value)
+        if p.bytes_per_element == 2:
+            return float(p.uint16_value)
+        if p.bytes_per_element == 1:
+            return float(p.uint8_value)
+    except Exception:
+        return None
+    return None
+
+
+def _point_rate(reader) -> float:
+    rate = _number_param(reader, "POINT:RATE")
+    if not rate or not np.isfinite(rate):
+        rate = float(reader.header.frame_rate)
+    return float(rate)
+
+
+def _point_labels(reader, n_points: int) -> list[str]:
+    names: list[str] = []
+    for key in ["POINT:LABELS"] + [f"POINT:LABELS{i}" for i in range(2, 100)]:
+        p = _param(reader, key)
+        if p is None:
+            if key != "POINT:LABELS":
+                break
+            continue
+        try:
+            names.extend(str(s).strip() for s in np.atleast_1d(p.string_array))
+        except Exception:
+            break
+    names = names[:n_points]
+    names += [f"*{i}" for i in range(len(names), n_points)]
+    return [n if n else f"*{i}" for i, n in enumerate(names)]
+
+
+def _vendor(reader, layout: _Layout) -> str:
+    parts = [_string_param(reader, "MANUFACTURER:COMPANY"), _string_param(reader, "MANUFACTURER:SOFTWARE")]
+    vendor = " ".join(p for p in parts if p)
+    kind = f"{layout.processor} {'REAL' if layout.is_real else 'INT'}"
+    return f"{vendor} ({kind})" if vendor else f"unknown ({kind})"
+
+
+def _layout(path: str, reader, file_size: int) -> _Layout:
+    header = reader.header
+    processor = {"INTEL": "Intel", "DEC": "DEC", "MIPS": "MIPS"}.get(reader._dtypes.proc_type, "Intel")
+    n_points = int(_number_param(reader, "POINT:USED") or header.point_count)
+    if n_points != header.point_count and header.point_count:
+        n_points = int(header.point_count)  # the header defines the data layout
+    if n_points > MAX_POINTS:
+        raise MocapInputError(path, f"absurd number of points ({n_points})")
+    scale = _number_param(reader, "POINT:SCALE")
+    if scale is None or scale == 0 or not np.isfinite(scale):
+        scale = float(header.scale_factor)
+    analog_words = int(header.analog_count)
+    data_block = int(_number_param(reader, "POINT:DATA_START") or header.data_block)
+    if data_block != header.data_block and header.data_block > 1:
+        data_block = int(header.data_block)
+    layout = _Layout(processor, scale < 0, abs(scale) or 1.0, n_points, analog_words,
+                     (data_block - 1) * BLOCK, 0)
+    frame_bytes = layout.frame_words * layout.word_bytes
+    available = max(file_size - layout.data_offset, 0) // frame_bytes if frame_bytes else 0
+    declared = int(header.last_frame) - int(header.first_frame) + 1
+    # The header's frame fields are 16 bits: longer takes state their length in parameters.
+    long_take = int(max(_number_param(reader, "POINT:FRAMES") or 0, _trial_frames(reader)))
+    if long_take > 65535 or declared <= 0 or header.last_frame == 65535:
+        declared = long_take or available
+    if frame_bytes and declared > available:
+        raise MocapInputError(
+            path, f"file is truncated: the header declares {declared} frames but the data "
+            f"section holds only {available}")
+    layout.n_frames = max(declared, 0)
+    return layout
+
+
+def _trial_frames(reader) -> int:
+    """Frame count from TRIAL:ACTUAL_START/END_FIELD (two 16-bit words each), 0 if absent."""
+    ends = []
+    for key in ("TRIAL:ACTUAL_START_FIELD", "TRIAL:ACTUAL_END_FIELD"):
+        p = _param(reader, key)
+        if p is None or p.total_bytes < 4:
+            return 0
+        lo, hi = p.uint16_array.ravel()[:2]
+        ends.append(int(lo) + 65536 * int(hi))
+    return ends[1] - ends[0] + 1 if ends[1] >= ends[0] else 0
+
+
+def _read_samples(fh, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
+    """Positions ``(frames, points, 3)`` and residuals ``(frames, points)``, float32, source units."""
+    n_f, n_p = layout.n_frames, layout.n_points
+    positions = np.empty((n_f, n_p, 3), dtype=np.float32)
+    residuals = np.empty((n_f, n_p), dtype=np.float32)
+    if n_f == 0 or n_p == 0:
+        return positions, residuals
+    if layout.processor == "MIPS":
+        dtype = np.dtype(">f4" if layout.is_real else ">i2")
+    else:
+        dtype = np.dtype("<f4" if layout.is_real else "<i2")
+    frame_bytes = layout.frame_words * layout.word_bytes
+    fh.seek(layout.data_offset)
+    for f0 in range(0, n_f, CHUNK_FRAMES):
+        nf = min(CHUNK_FRAMES, n_f - f0)
+        raw = fh.read(nf * frame_bytes)
+        if layout.processor == "DEC" and layout.is_real:
+            from c3d.c3d import DEC_to_IEEE_BYTES
+
+            words = DEC_to_IEEE_BYTES(raw).reshape(nf, layout.frame_words)
+        else:
+            words = np.frombuffer(raw, dtype=dtype).reshape(nf, layout.frame_words)
+        pts = words[:, :4 * n_p].reshape(nf, n_p, 4)
+        xyz = positions[f0:f0 + nf]
+        xyz[...] = pts[..., :3]
+        fourth = pts[..., 3]
+        if not layout.is_real:
+            xyz *= layout.scale
+        res = residuals[f0:f0 + nf]
+        # The 4th word: negative = invalid; else low byte = residual / |scale|.
+        res[...] = np.where(fourth < 0, -1.0, (fourth.astype(np.int32) & 0xFF) * layout.scale)
+        mark_missing(xyz, res)
+    return positions, residuals
+
+
+def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
+    """Write ``take`` as a C3D file (Intel, REAL), atomically.
+
+    Missing samples are written as invalid (residual -1), so that every reader sees the gap.
+    Names are written in order; unlabeled slots should be named ``*N``.
+
+    Args:
+        take: positions in metres.
+        path: output file; it appears complete or not at all.
+        units: POINT:UNITS of the file ("mm" by default, as capture systems write).
+    """
+    import ezc3d
+
+    path = os.fspath(path)
+    scale = 1.0 / unit_scale(units, path)
+    n_f, n_p = take.n_frames, take.n_points
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [float(take.rate)]
+    c["parameters"]["POINT"]["UNITS"]["value"] = [units]
+    c["parameters"]["POINT"]["LABELS"]["value"] = [n[:32] for n in take.names]
+    c["parameters"]["POINT"]["DESCRIPTIONS"]["value"] = [""] * n_p
+    c.add_parameter("MANUFACTURER", "COMPANY", ["mocap_autolabel"])
+    c.add_parameter("MANUFACTURER", "SOFTWARE", ["mocap_autolabel"])
+    pts = np.zeros((4, n_p, n_f), dtype=np.float64)
+    pts[:3] = np.transpose(take.positions, (2, 1, 0)) * scale
+    pts[3] = 1.0
+    c["data"]["points"] = pts
+    valid = take.valid.T
+    residuals = np.where(valid, 0.0, -1.0)
+    if take.residuals is not None:
+        residuals = np.where(valid, np.nan_to_num(take.residuals.T) * scale, -1.0)
+    c["data"]["meta_points"]["residuals"] = residuals[np.newaxis].astype(np.float64)
+    c["data"]["meta_points"]["camera_masks"] = np.zeros((7, n_p, n_f), dtype=bool)
+    c["header"]["points"]["first_frame"] = max(int(take.first_frame) - 1, 0)
+    with atomic_output(path) as tmp:
+        c.write(tmp)

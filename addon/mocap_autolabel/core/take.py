@@ -1,0 +1,173 @@
+"""The Take: one capture's marker positions, the unit everything else works on."""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import MocapInputError
+
+#: Metres per source unit; C3D's POINT:UNITS and TRC's Units use these spellings.
+UNIT_SCALE = {"mm": 1e-3, "cm": 1e-2, "dm": 1e-1, "m": 1.0, "in": 0.0254, "ft": 0.3048}
+
+#: Names the capture systems give to points they have not labeled: ``*12``, ``M012``, empty.
+UNLABELED_NAME = re.compile(r"^(\*\d+|M\d{3,}|Unlabeled\s*\d*|)$", re.IGNORECASE)
+
+#: A marker further than this from the origin (metres) means wrong units or garbage.
+ABSURD_DISTANCE_M = 1000.0
+
+
+@dataclass
+class Take:
+    """Marker positions of one capture.
+
+    Attributes:
+        positions: float32 array ``(frames, points, 3)`` in metres; NaN where a sample is missing.
+        names: one name per point slot (``len(names) == points``); unlabeled slots are ``*N``.
+        rate: frames per second (may be non-integer, e.g. 69.993).
+        first_frame: frame number of ``positions[0]`` as the file counts frames.
+        source_units: the unit the file stored positions in (``"mm"``, ``"m"``...).
+        residuals: float32 ``(frames, points)`` in metres, or None when the format has none;
+            NaN where the sample is missing.
+        source: path of the file the take came from ("" if built in memory).
+        vendor: capture system or writer of the file, as far as the file says.
+        warnings: things a user should know that did not stop the read.
+    """
+
+    positions: np.ndarray
+    names: list[str]
+    rate: float
+    first_frame: int = 1
+    source_units: str = "mm"
+    residuals: np.ndarray | None = None
+    source: str = ""
+    vendor: str = "unknown"
+    warnings: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        p = self.positions
+        if p.ndim != 3 or p.shape[2] != 3:
+            raise ValueError(f"positions must be (frames, points, 3), got {p.shape}")
+        if len(self.names) != p.shape[1]:
+            raise ValueError(f"{len(self.names)} names for {p.shape[1]} points")
+        if self.residuals is not None and self.residuals.shape != p.shape[:2]:
+            raise ValueError(f"residuals {self.residuals.shape} do not match positions {p.shape}")
+        if not (self.rate > 0 and np.isfinite(self.rate)):
+            raise ValueError(f"rate must be a positive number of frames per second, got {self.rate}")
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def n_points(self) -> int:
+        return int(self.positions.shape[1])
+
+    @property
+    def valid(self) -> np.ndarray:
+        """bool ``(frames, points)``: True where a sample exists."""
+        return ~np.isnan(self.positions[..., 0])
+
+    @property
+    def missing_fraction(self) -> float:
+        """Share of (frame, point) samples that are missing, 0 for an empty take."""
+        n = self.n_frames * self.n_points
+        return float(1.0 - self.valid.sum() / n) if n else 0.0
+
+    @property
+    def unlabeled(self) -> np.ndarray:
+        """bool ``(points,)``: True for slots whose name is a capture system's placeholder."""
+        return np.array([bool(UNLABELED_NAME.match(n.strip())) for n in self.names], dtype=bool)
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last frame."""
+        return max(self.n_frames - 1, 0) / self.rate
+
+    def summary(self) -> dict:
+        """A plain dict describing the take, used by ``info`` and reports."""
+        n_unl = int(self.unlabeled.sum())
+        return {
+            "file": self.source,
+            "vendor": self.vendor,
+            "points": self.n_points,
+            "frames": self.n_frames,
+            "rate": self.rate,
+            "first_frame": self.first_frame,
+            "duration_s": round(self.duration, 3),
+            "units": self.source_units,
+            "missing_percent": round(100.0 * self.missing_fraction, 2),
+            "labeled_points": self.n_points - n_unl,
+            "unlabeled_points": n_unl,
+            "has_residuals": self.residuals is not None,
+            "warnings": list(self.warnings),
+        }
+
+
+def unit_scale(units: str, path: str | os.PathLike | None = None) -> float:
+    """Metres per ``units``; raises MocapInputError naming ``path`` for an unknown unit."""
+    key = units.strip().lower()
+    if key in ("millimeters", "millimetres", "millimeter"):
+        key = "mm"
+    elif key in ("meters", "metres", "meter"):
+        key = "m"
+    try:
+        return UNIT_SCALE[key]
+    except KeyError:
+        raise MocapInputError(path, f"unknown position unit {units!r} (expected one of {sorted(UNIT_SCALE)})") from None
+
+
+def mark_missing(positions: np.ndarray, residuals: np.ndarray | None = None) -> np.ndarray:
+    """Set to NaN, in place, every sample that a file marks as missing.
+
+    Real files use three conventions: a negative residual, NaN coordinates, and an exact
+    (0, 0, 0) position. Returns the bool ``(frames, points)`` mask of missing samples.
+
+    Args:
+        positions: float ``(frames, points, 3)``, modified in place.
+        residuals: float ``(frames, points)`` or None; negative means missing.
+    """
+    missing = np.isnan(positions).any(axis=2)
+    missing |= ~positions.any(axis=2)  # exact (0, 0, 0)
+    if residuals is not None:
+        missing |= residuals < 0
+    positions[missing] = np.nan
+    if residuals is not None:
+        residuals[missing] = np.nan
+    return missing
+
+
+def check_plausible(take: Take) -> None:
+    """Add a warning to ``take`` when its positions are absurd for a capture volume."""
+    valid = take.valid
+    if not valid.any():
+        if take.n_points:
+            take.warnings.append("every sample is missing")
+        return
+    extent = float(np.nanmax(np.abs(take.positions[valid])))
+    if extent > ABSURD_DISTANCE_M:
+        take.warnings.append(
+            f"markers reach {extent:.0f} m from the origin: the file's unit "
+            f"({take.source_units!r}) is probably wrong"
+        )
+
+
+def read_take(path: str | os.PathLike) -> Take:
+    """Read a C3D, TRC or Qualisys TSV file into a Take (positions in metres).
+
+    Raises:
+        MocapInputError: the file is missing, unreadable, of an unknown type or damaged.
+    """
+    from .formats import reader_for
+
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise MocapInputError(path, "no such file")
+    if os.path.isdir(path):
+        raise MocapInputError(path, "is a folder, not a take file")
+    take = reader_for(path)(path)
+    check_plausible(take)
+    return take
