@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
+import secrets
 from collections.abc import Iterator
 
 
@@ -19,8 +19,8 @@ def atomic_output(path: str | os.PathLike) -> Iterator[str]:
     folder = os.path.dirname(os.path.abspath(path))
     os.makedirs(folder, exist_ok=True)
     stem, ext = os.path.splitext(os.path.basename(path))
-    fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=f".partial{ext}", dir=folder)
-    os.close(fd)
+    # Not created here: writers such as Blender back up an existing target as ``.blend1``.
+    tmp = os.path.join(folder, f".{stem}.{secrets.token_hex(4)}.partial{ext}")
     try:
         yield tmp
         os.replace(tmp, path)

@@ -16,8 +16,8 @@ UNIT_SCALE = {"mm": 1e-3, "cm": 1e-2, "dm": 1e-1, "m": 1.0, "in": 0.0254, "ft": 
 #: Names the capture systems give to points they have not labeled: ``*12``, ``M012``, empty.
 UNLABELED_NAME = re.compile(r"^(\*\d+|M\d{3,}|Unlabeled\s*\d*|)$", re.IGNORECASE)
 
-#: A marker further than this from the origin (metres) means wrong units or garbage.
-ABSURD_DISTANCE_M = 1000.0
+#: A marker further than this from the origin (metres) means wrong units: no capture volume is that big.
+ABSURD_DISTANCE_M = 100.0
 
 
 @dataclass

@@ -84,8 +84,8 @@ def read_c3d(path: str | os.PathLike) -> Take:
     units = _string_param(reader, "POINT:UNITS")
     take_warnings = [f"repaired parameter section: {fix}" for fix in fixes]
     if not units:
-        units = "mm"
-        take_warnings.append("no POINT:UNITS parameter; assuming millimetres")
+        units = _guess_units(positions)
+        take_warnings.append(f"no POINT:UNITS parameter; the values look like {units}")
     scale_m = unit_scale(units, path)
     positions *= scale_m
     residuals *= scale_m
@@ -111,6 +111,12 @@ def read_c3d(path: str | os.PathLike) -> Take:
         vendor=_vendor(reader, layout),
         warnings=take_warnings,
     )
+
+
+def _guess_units(positions: np.ndarray) -> str:
+    """'m' if every coordinate is within 20 units of the origin (no capture volume is 20 mm), else 'mm'."""
+    finite = np.isfinite(positions)
+    return "m" if finite.any() and np.abs(positions[finite]).max() < 20 else "mm"
 
 
 def rebuild_parameter_section(meta: bytes) -> tuple[bytes, list[str]]:
@@ -301,8 +307,10 @@ def _layout(path: str, reader, file_size: int) -> _Layout:
     declared = int(header.last_frame) - int(header.first_frame) + 1
     # The header's frame fields are 16 bits: longer takes state their length in parameters.
     long_take = int(max(_number_param(reader, "POINT:FRAMES") or 0, _trial_frames(reader)))
-    if long_take > 65535 or declared <= 0 or header.last_frame == 65535:
-        declared = long_take or available
+    if long_take > 65535:
+        declared = long_take
+    elif declared <= 0 or header.last_frame == 65535:  # saturated or wrapped: trust the file size
+        declared = available
     if frame_bytes and declared > available:
         raise MocapInputError(
             path, f"file is truncated: the header declares {declared} frames but the data "

@@ -22,13 +22,12 @@ def read_qtm_tsv(path: str | os.PathLike) -> Take:
     lines = read_lines(path)
     header: dict[str, list[str]] = {}
     row = 0
-    for row, line in enumerate(lines):
-        key, _, rest = line.partition("\t")
+    while row < len(lines):  # header lines: an upper-case key, a tab, values
+        key, _, rest = lines[row].partition("\t")
         if not key or key[0].isdigit() or key[0] in "-." or key == "Frame":
             break
         header[key.strip()] = rest.split("\t")
-    else:
-        row = len(lines)
+        row += 1
     if "MARKER_NAMES" not in header or "FREQUENCY" not in header:
         raise MocapInputError(path, "not a Qualisys TSV export (no MARKER_NAMES / FREQUENCY header)")
     names = [n.strip() for n in header["MARKER_NAMES"] if n.strip()]

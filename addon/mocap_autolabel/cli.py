@@ -1,0 +1,150 @@
+"""Command line: ``python -m mocap_autolabel COMMAND ...`` or, inside Blender,
+``blender -b --python-exit-code 1 -P addon/mocap_autolabel/cli.py -- COMMAND ...``.
+
+Exit codes: 0 success, 1 a file failed, 2 bad usage. Errors are one line naming the file.
+Only the standard library is imported at module level, so this file also runs as a script.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):
+        self.print_usage(sys.stderr)
+        raise _UsageError(f"{self.prog}: error: {message}")
+
+
+class _UsageError(Exception):
+    pass
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="mocap_autolabel", description="Automatic labeling of optical hand motion capture.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    info = sub.add_parser("info", help="summarise take files (C3D, TRC, Qualisys TSV)")
+    info.add_argument("files", nargs="+", metavar="FILE")
+    info.add_argument("--json", action="store_true", help="one JSON object per file")
+
+    imp = sub.add_parser("import", help="import a take into a new .blend (needs Blender or the bpy module)")
+    imp.add_argument("file", metavar="FILE")
+    imp.add_argument("--blend", required=True, metavar="OUT.blend", help="the .blend file to write")
+    imp.add_argument("--scale", type=float, default=1.0, help="factor on positions in metres (default 1)")
+    imp.add_argument("--frame-offset", type=int, default=0, help="added to the file's frame numbers")
+    imp.add_argument("--names", default="*", metavar="PATTERN",
+                     help="import only points whose name matches (* and ? wildcards)")
+    imp.add_argument("--summary", metavar="OUT.json", help="also write a JSON summary of the import")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one command; returns the process exit code."""
+    try:
+        args = build_parser().parse_args(argv)
+    except _UsageError as exc:
+        print(exc, file=sys.stderr)
+        return EXIT_USAGE
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    if args.command == "import" and not args.blend.lower().endswith(".blend"):
+        print(f"mocap_autolabel import: error: --blend must name a .blend file, got {args.blend!r}", file=sys.stderr)
+        return EXIT_USAGE
+    command = {"info": _info, "import": _import}[args.command]
+    return command(args)
+
+
+def _fail(path: str, exc: BaseException) -> int:
+    from .core.errors import MocapInputError
+
+    if isinstance(exc, MocapInputError):
+        print(f"error: {exc}", file=sys.stderr)
+    else:
+        print(f"error: {path}: unexpected {type(exc).__name__}: {exc}", file=sys.stderr)
+    return EXIT_FAILED
+
+
+def _info(args) -> int:
+    from .core.take import read_take
+
+    status = EXIT_OK
+    for path in args.files:
+        try:
+            take = read_take(path)
+        except Exception as exc:
+            status = _fail(path, exc)
+            continue
+        summary = take.summary()
+        if args.json:
+            print(json.dumps(summary))
+            continue
+        names = ("all labeled" if not summary["unlabeled_points"] else
+                 "unlabeled (*N)" if not summary["labeled_points"] else
+                 f"{summary['labeled_points']} labeled, {summary['unlabeled_points']} unlabeled (*N)")
+        print(f"{path}\n"
+              f"  vendor   {summary['vendor']}\n"
+              f"  points   {summary['points']} ({names})\n"
+              f"  frames   {summary['frames']} from {summary['first_frame']} at {summary['rate']:g} Hz "
+              f"({summary['duration_s']:g} s)\n"
+              f"  units    {summary['units']}\n"
+              f"  missing  {summary['missing_percent']:.2f} %")
+        for warning in summary["warnings"]:
+            print(f"  warning  {warning}")
+    return status
+
+
+def _import(args) -> int:
+    try:
+        import bpy
+    except ImportError:
+        print("error: the import command needs Blender: install the bpy module (pip install bpy==5.0.1) "
+              "or run blender -b --python-exit-code 1 -P addon/mocap_autolabel/cli.py -- import ...",
+              file=sys.stderr)
+        return EXIT_FAILED
+    from .blender.scene import ImportOptions, build_take
+    from .core.atomic import atomic_output
+    from .core.take import read_take
+
+    try:
+        take = read_take(args.file)
+    except Exception as exc:
+        return _fail(args.file, exc)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    options = ImportOptions(scale=args.scale, frame_offset=args.frame_offset, name_filter=args.names)
+    collection = build_take(take, scene, options)
+    with atomic_output(args.blend) as tmp:
+        bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
+    summary = take.summary() | {
+        "blend": os.path.abspath(args.blend),
+        "collection": collection.name,
+        "empties": len(collection.objects),
+        "scene_frames": [scene.frame_start, scene.frame_end],
+        "scene_fps": scene.render.fps / scene.render.fps_base,
+    }
+    if args.summary:
+        with atomic_output(args.summary) as tmp, open(tmp, "w") as fh:
+            json.dump(summary, fh, indent=2)
+    print(f"{args.file}: {summary['empties']} markers x {take.n_frames} frames -> {args.blend}")
+    for warning in take.warnings:
+        print(f"  warning  {warning}")
+    return EXIT_OK
+
+
+def _argv_after_double_dash(argv: list[str]) -> list[str]:
+    return argv[argv.index("--") + 1:] if "--" in argv else []
+
+
+if __name__ == "__main__":
+    # Run as a script (blender -b -P .../cli.py -- ARGS): import the package from beside us.
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    from mocap_autolabel.cli import main as _main
+
+    sys.exit(_main(_argv_after_double_dash(sys.argv)))

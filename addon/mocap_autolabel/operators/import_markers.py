@@ -1,0 +1,70 @@
+"""File > Import > C3D markers: a take file becomes a collection of animated empties."""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+from bpy.props import BoolProperty, CollectionProperty, FloatProperty, IntProperty, StringProperty
+from bpy_extras.io_utils import ImportHelper
+
+
+class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
+    """Import unlabeled or labeled markers (C3D, TRC, Qualisys TSV) as animated empties"""
+
+    bl_idname = "mocap_autolabel.import_markers"
+    bl_label = "Import C3D Markers"
+    bl_options = {"REGISTER", "UNDO", "PRESET"}
+
+    filename_ext = ".c3d"
+    filter_glob: StringProperty(default="*.c3d;*.trc;*.tsv", options={"HIDDEN"})
+    files: CollectionProperty(type=bpy.types.OperatorFileListElement, options={"HIDDEN", "SKIP_SAVE"})
+    directory: StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
+
+    scale: FloatProperty(name="Scale", description="Factor applied to positions (metres) on import",
+                         default=1.0, min=1e-6, soft_max=100.0)
+    frame_offset: IntProperty(name="Frame Offset", description="Added to the file's frame numbers",
+                              default=0)
+    name_filter: StringProperty(name="Point Names", default="*",
+                                description="Import only points whose name matches this pattern "
+                                            "(* and ? wildcards, case-insensitive)")
+    set_scene: BoolProperty(name="Set Scene Frame Rate and Range", default=True)
+
+    def paths(self) -> list[str]:
+        if self.files and self.directory:
+            return [os.path.join(self.directory, f.name) for f in self.files if f.name]
+        return [self.filepath] if self.filepath else []
+
+    def invoke(self, context, event):
+        # A drag-and-drop (FileHandler) arrives with the path set: import without a dialog.
+        if self.filepath or (self.files and self.directory):
+            return self.execute(context)
+        return ImportHelper.invoke(self, context, event)
+
+    def execute(self, context):
+        from ..blender.scene import ImportOptions, build_take
+        from ..core.errors import MocapInputError
+        from ..core.take import read_take
+
+        options = ImportOptions(self.scale, self.frame_offset, self.name_filter, self.set_scene)
+        paths = self.paths()
+        if not paths:
+            self.report({"ERROR"}, "No file given")
+            return {"CANCELLED"}
+        imported = 0
+        for path in paths:
+            try:
+                take = read_take(path)
+            except MocapInputError as exc:
+                self.report({"ERROR"}, str(exc))
+                continue
+            except Exception as exc:  # never let a bad file take Blender down
+                self.report({"ERROR"}, f"{path}: unexpected error while reading ({type(exc).__name__}: {exc})")
+                continue
+            collection = build_take(take, context.scene, options)
+            for warning in take.warnings:
+                self.report({"WARNING"}, f"{os.path.basename(path)}: {warning}")
+            self.report({"INFO"}, f"Imported {len(collection.objects)} markers x {take.n_frames} frames "
+                                  f"from {os.path.basename(path)}")
+            imported += 1
+        return {"FINISHED"} if imported else {"CANCELLED"}

@@ -1,0 +1,39 @@
+"""Shared fixtures: the real data folder (tests skip without it) and the bpy module."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "addon"))
+
+#: ../shared/data beside the repository; MOCAP_DATA overrides.
+DATA = Path(os.environ.get("MOCAP_DATA", ROOT.parent / "shared" / "data"))
+
+
+def data_path(*parts: str) -> Path:
+    """A path under the shared data folder; skips the test when it is absent."""
+    path = DATA.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"real data not available: {path}")
+    return path
+
+
+@pytest.fixture(scope="session")
+def bpy_module():
+    """The bpy module with the add-on enabled; skips when bpy is not installed."""
+    bpy = pytest.importorskip("bpy", reason="the bpy module (pip install bpy==5.0.1) is not installed")
+    import addon_utils
+
+    addon_utils.enable("mocap_autolabel", default_set=True)
+    return bpy
+
+
+@pytest.fixture
+def empty_scene(bpy_module):
+    bpy_module.ops.wm.read_homefile(use_empty=True)
+    return bpy_module.context.scene

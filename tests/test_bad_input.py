@@ -1,0 +1,108 @@
+"""Bad input: one clear error naming the file, never a traceback or a half-written output."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from conftest import data_path
+from helpers import small_take
+
+from mocap_autolabel.core.errors import MocapInputError
+from mocap_autolabel.core.formats.c3d import write_c3d
+from mocap_autolabel.core.take import read_take
+
+
+@pytest.fixture
+def good_c3d(tmp_path):
+    path = tmp_path / "good.c3d"
+    write_c3d(small_take(frames=200, points=6), path)
+    return path
+
+
+def _error(path) -> str:
+    with pytest.raises(MocapInputError) as info:
+        read_take(path)
+    message = str(info.value)
+    assert str(path) in message and "\n" not in message
+    return message
+
+
+def test_truncated_file(good_c3d, tmp_path):
+    data = good_c3d.read_bytes()
+    cut = tmp_path / "cut.c3d"
+    cut.write_bytes(data[: len(data) - 3000])
+    assert "truncated" in _error(cut)
+
+
+def test_truncated_real_file(tmp_path):
+    src = data_path("c3d", "MocapRecovery/data/85_02.c3d")
+    cut = tmp_path / "85_02_cut.c3d"
+    cut.write_bytes(src.read_bytes()[: src.stat().st_size // 2])
+    assert "truncated" in _error(cut)
+
+
+def test_random_bytes(tmp_path):
+    path = tmp_path / "noise.c3d"
+    path.write_bytes(np.random.default_rng(1).integers(0, 256, 20000, dtype=np.uint8).tobytes())
+    assert "not a C3D file" in _error(path)
+
+
+def test_file_shorter_than_a_header(tmp_path):
+    path = tmp_path / "short.c3d"
+    path.write_bytes(b"\x02\x50\x00")
+    assert "not a C3D file" in _error(path)
+
+
+def test_parameter_section_past_the_end(good_c3d, tmp_path):
+    data = bytearray(good_c3d.read_bytes())
+    data[0] = 250  # parameter block 250: far past the end of a small file
+    path = tmp_path / "badptr.c3d"
+    path.write_bytes(bytes(data))
+    assert "outside the file" in _error(path)
+
+
+def test_absurd_point_count_is_an_error_not_a_huge_allocation(good_c3d, tmp_path):
+    data = bytearray(good_c3d.read_bytes())
+    data[2:4] = (60000).to_bytes(2, "little")  # header point count
+    path = tmp_path / "huge.c3d"
+    path.write_bytes(bytes(data))
+    assert "truncated" in _error(path)
+
+
+def test_missing_unknown_and_folder(tmp_path):
+    assert "no such file" in _error(tmp_path / "absent.c3d")
+    other = tmp_path / "take.fbx"
+    other.write_text("x")
+    assert "unknown file type" in _error(other)
+    folder = tmp_path / "folder.c3d"
+    folder.mkdir()
+    assert "folder" in _error(folder)
+
+
+def test_bad_text_files(tmp_path):
+    trc = tmp_path / "bad.trc"
+    trc.write_text("hello\nworld\n")
+    assert "not a TRC file" in _error(trc)
+    tsv = tmp_path / "bad.tsv"
+    tsv.write_bytes(b"\xff\xfe\x00garbage")
+    assert "not a text file" in _error(tsv)
+    tsv.write_text("NO_OF_FRAMES\t3\n")
+    assert "not a Qualisys TSV" in _error(tsv)
+
+
+def test_wrong_units_warns(tmp_path):
+    take = small_take()
+    take.positions *= 1000.0  # metres written where millimetres were meant
+    path = tmp_path / "units.c3d"
+    write_c3d(take, path, units="m")
+    assert any("unit" in w and "wrong" in w for w in read_take(path).warnings)
+
+
+def test_failed_write_leaves_nothing(tmp_path):
+    take = small_take()
+    target = tmp_path / "out.c3d"
+    with pytest.raises(MocapInputError):
+        write_c3d(take, target, units="parsec")
+    assert os.listdir(tmp_path) == []
