@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from conftest import data_path
 from helpers import small_take
-
 from mocap_autolabel.core.errors import MocapInputError
 from mocap_autolabel.core.formats.c3d import write_c3d
 from mocap_autolabel.core.take import read_take

@@ -8,7 +8,6 @@ import warnings
 import numpy as np
 import pytest
 from conftest import DATA, data_path
-
 from mocap_autolabel.core.errors import MocapInputError
 from mocap_autolabel.core.formats.c3d import read_c3d
 

@@ -1,9 +1,8 @@
 import numpy as np
 import pytest
 from helpers import small_take
-
-from mocap_autolabel.core.take import Take, mark_missing, unit_scale
 from mocap_autolabel.core.errors import MocapInputError
+from mocap_autolabel.core.take import Take, mark_missing, unit_scale
 from mocap_autolabel.core.tracklets import find_tracklets
 
 

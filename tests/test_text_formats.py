@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 from conftest import data_path
-
 from mocap_autolabel.core.take import read_take
 
 HAN19 = ["ThumbCMC", "ThumbMCP", "ThumbIP", "ThumbTip", "IndexMCP", "IndexPIP", "IndexTip", "MiddleMCP",

@@ -8,7 +8,6 @@ import warnings
 import numpy as np
 import pytest
 from helpers import small_take
-
 from mocap_autolabel.core.formats.c3d import read_c3d, write_c3d
 
 

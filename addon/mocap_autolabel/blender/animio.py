@@ -84,8 +84,12 @@ def find_fcurve(obj: bpy.types.Object, data_path: str, index: int = 0):
 def write_keys(fcurve, frames: np.ndarray, values: np.ndarray, interpolation: np.ndarray | str = "LINEAR") -> None:
     """Replace the keys of ``fcurve`` with (frames, values) in one bulk write.
 
+    ``fcurve.update()`` (sorting and handle recalculation, over half the cost) runs only when
+    Bezier keys are written: the frames must be increasing, and LINEAR/CONSTANT keys are
+    evaluated without their handles, which Blender recalculates when a user edits keys.
+
     Args:
-        frames: float ``(n,)`` Blender frame numbers, increasing.
+        frames: float ``(n,)`` Blender frame numbers, strictly increasing.
         values: float ``(n,)``.
         interpolation: one name for all keys, or int ``(n,)`` enum values (``interpolation_value``).
     """
@@ -105,7 +109,8 @@ def write_keys(fcurve, frames: np.ndarray, values: np.ndarray, interpolation: np
     else:
         interp = np.asarray(interpolation, dtype=np.int32)
     points.foreach_set("interpolation", interp)
-    fcurve.update()
+    if (interp == _INTERPOLATION["BEZIER"]).any():
+        fcurve.update()
 
 
 def interpolation_value(name: str) -> int:

@@ -142,12 +142,13 @@ def mark_missing(positions: np.ndarray, residuals: np.ndarray | None = None) -> 
 
 def check_plausible(take: Take) -> None:
     """Add a warning to ``take`` when its positions are absurd for a capture volume."""
-    valid = take.valid
-    if not valid.any():
-        if take.n_points:
-            take.warnings.append("every sample is missing")
+    if take.positions.size == 0:
         return
-    extent = float(np.nanmax(np.abs(take.positions[valid])))
+    if np.isnan(take.positions[..., 0]).all():
+        take.warnings.append("every sample is missing")
+        return
+    # Reductions only: no copy of the positions (they can be hundreds of MB).
+    extent = float(max(np.nanmax(take.positions), -np.nanmin(take.positions)))
     if extent > ABSURD_DISTANCE_M:
         take.warnings.append(
             f"markers reach {extent:.0f} m from the origin: the file's unit "

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ... import __version__
 from ..atomic import atomic_output
 from ..errors import MocapInputError
 from ..take import Take, mark_missing, unit_scale
@@ -279,8 +280,8 @@ def _point_labels(reader, n_points: int) -> list[str]:
 
 
 def _vendor(reader, layout: _Layout) -> str:
-    parts = [_string_param(reader, "MANUFACTURER:COMPANY"), _string_param(reader, "MANUFACTURER:SOFTWARE")]
-    vendor = " ".join(p for p in parts if p)
+    company, software = _string_param(reader, "MANUFACTURER:COMPANY"), _string_param(reader, "MANUFACTURER:SOFTWARE")
+    vendor = software if software.startswith(company) else " ".join(p for p in (company, software) if p)
     kind = f"{layout.processor} {'REAL' if layout.is_real else 'INT'}"
     return f"{vendor} ({kind})" if vendor else f"unknown ({kind})"
 
@@ -388,7 +389,7 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     c["parameters"]["POINT"]["LABELS"]["value"] = [n[:32] for n in take.names]
     c["parameters"]["POINT"]["DESCRIPTIONS"]["value"] = [""] * n_p
     c.add_parameter("MANUFACTURER", "COMPANY", ["mocap_autolabel"])
-    c.add_parameter("MANUFACTURER", "SOFTWARE", ["mocap_autolabel"])
+    c.add_parameter("MANUFACTURER", "SOFTWARE", [f"mocap_autolabel {__version__}"])
     pts = np.zeros((4, n_p, n_f), dtype=np.float64)
     pts[:3] = np.transpose(take.positions, (2, 1, 0)) * scale
     pts[3] = 1.0

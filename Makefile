@@ -1,0 +1,43 @@
+# mocap_autolabel: every target sets up its own virtual environment first.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: venv demo test lint bench extension sample clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e ".[blender,dev]"
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+## demo: import the bundled raw sample take; writes out/demo.blend and out/demo_summary.json
+demo: venv
+	$(BIN)/python -m mocap_autolabel info samples/demo_take.c3d
+	$(BIN)/python -m mocap_autolabel import samples/demo_take.c3d --blend out/demo.blend --summary out/demo_summary.json
+	@echo "demo: open out/demo.blend in Blender; summary in out/demo_summary.json"
+
+## test: ruff, then every test (real-data tests skip when ../shared/data is absent)
+test: venv lint
+	$(BIN)/python -m pytest
+
+lint: venv
+	$(BIN)/ruff check .
+
+## bench: speed and memory reports under benchmarks/reports/
+bench: venv
+	$(BIN)/python benchmarks/import_speed.py
+
+## extension: one validated Blender extension zip per platform in dist/
+extension: venv
+	$(BIN)/python tools/build_extension.py --output-dir dist
+
+## sample: regenerate the bundled demo take (deterministic, byte for byte)
+sample: venv
+	$(BIN)/python tools/make_sample.py samples/demo_take.c3d
+
+clean:
+	rm -rf $(VENV) dist out .pytest_cache .ruff_cache

@@ -1,0 +1,1 @@
+"""Synthetic takes made by the project itself (no third-party data)."""

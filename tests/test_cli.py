@@ -1,0 +1,79 @@
+"""The command line, in-process (python -m) and as a Blender -P script."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT, data_path
+from helpers import small_take
+from mocap_autolabel.cli import main
+from mocap_autolabel.core.formats.c3d import write_c3d
+
+
+def test_info_real_file(capsys):
+    path = data_path("c3d", "auto-marker-label/data/S01_Pronetokneel01_mksrem.c3d")
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "76 (unlabeled (*N))" in out and "2176 from 1 at 240 Hz" in out and "20.69 %" in out
+
+
+def test_info_json_and_failures(capsys, tmp_path):
+    good = tmp_path / "good.c3d"
+    write_c3d(small_take(), good)
+    bad = tmp_path / "bad.c3d"
+    bad.write_bytes(b"")
+    assert main(["info", "--json", str(good), str(bad)]) == 1
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out.strip())
+    assert summary["points"] == 4 and summary["frames"] == 50 and summary["vendor"].startswith("mocap_autolabel")
+    assert captured.err.strip() == f"error: {bad}: file is empty (0 bytes)"
+
+
+def test_usage_errors_exit_2(capsys):
+    assert main([]) == 2
+    assert main(["frobnicate"]) == 2
+    assert main(["import", "x.c3d"]) == 2  # --blend is required
+    assert main(["import", "x.c3d", "--blend", "x.txt"]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_import_writes_blend_and_summary(tmp_path, bpy_module):
+    src = tmp_path / "take.c3d"
+    write_c3d(small_take(frames=120, points=5), src)
+    blend, summary = tmp_path / "out" / "take.blend", tmp_path / "out" / "summary.json"
+    assert main(["import", str(src), "--blend", str(blend), "--summary", str(summary)]) == 0
+    info = json.loads(summary.read_text())
+    assert info["empties"] == 5 and info["frames"] == 120 and info["scene_fps"] == pytest.approx(100.0)
+    assert sorted(os.listdir(blend.parent)) == ["summary.json", "take.blend"]  # no partial files left
+    bpy_module.ops.wm.open_mainfile(filepath=str(blend))
+    assert len(bpy_module.data.collections["take"].objects) == 5
+    bpy_module.ops.wm.read_homefile(use_empty=True)
+
+
+def test_import_failure_writes_nothing(tmp_path, capsys):
+    bad = tmp_path / "bad.c3d"
+    bad.write_bytes(b"\x02\x50" + b"\x00" * 600)
+    blend = tmp_path / "never.blend"
+    assert main(["import", str(bad), "--blend", str(blend)]) == 1
+    assert not blend.exists() and capsys.readouterr().err.startswith(f"error: {bad}: ")
+
+
+def _script(*args: str) -> subprocess.CompletedProcess:
+    """Run cli.py as Blender runs a -P script: by path, with the arguments after '--'."""
+    return subprocess.run([sys.executable, str(ROOT / "addon" / "mocap_autolabel" / "cli.py"), "--", *args],
+                          capture_output=True, text=True, timeout=120, cwd=Path(ROOT).parent)
+
+
+def test_script_mode_like_blender_dash_p(tmp_path):
+    good = tmp_path / "good.c3d"
+    write_c3d(small_take(), good)
+    result = _script("info", str(good))
+    assert result.returncode == 0 and "points   4" in result.stdout
+    result = _script("info", str(tmp_path / "missing.c3d"))
+    assert result.returncode == 1 and result.stderr.strip().endswith("missing.c3d: no such file")
+    assert _script().returncode == 2
