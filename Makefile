@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: venv demo test lint bench extension sample clean
+.PHONY: venv demo test lint bench extension sample clean test-bpy42
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -41,3 +41,9 @@ sample: venv
 
 clean:
 	rm -rf $(VENV) dist out .pytest_cache .ruff_cache
+
+## test-bpy42: the Blender tests on bpy 4.2.0 (Blender 4.2 LTS: actions without slots)
+test-bpy42:
+	$(PYTHON) -m venv .venv42
+	.venv42/bin/python -m pip install -q "bpy==4.2.0" "numpy==1.26.4" ezc3d c3d pytest
+	.venv42/bin/python -m pytest -q tests/test_blender_import.py tests/test_cli.py
