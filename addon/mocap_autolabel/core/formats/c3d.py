@@ -29,8 +29,6 @@ BLOCK = 512
 MAGIC = 0x50
 #: Frames converted per chunk: bounds the temporary memory of a read.
 CHUNK_FRAMES = 8192
-#: More point slots than this is not a capture, it is a corrupt header.
-MAX_POINTS = 65535
 
 
 @dataclass
@@ -289,18 +287,13 @@ def _vendor(reader, layout: _Layout) -> str:
 def _layout(path: str, reader, file_size: int) -> _Layout:
     header = reader.header
     processor = {"INTEL": "Intel", "DEC": "DEC", "MIPS": "MIPS"}.get(reader._dtypes.proc_type, "Intel")
-    n_points = int(_number_param(reader, "POINT:USED") or header.point_count)
-    if n_points != header.point_count and header.point_count:
-        n_points = int(header.point_count)  # the header defines the data layout
-    if n_points > MAX_POINTS:
-        raise MocapInputError(path, f"absurd number of points ({n_points})")
+    # The header defines the data layout; parameters only fill in where it says 0.
+    n_points = int(header.point_count or _number_param(reader, "POINT:USED") or 0)
     scale = _number_param(reader, "POINT:SCALE")
     if scale is None or scale == 0 or not np.isfinite(scale):
         scale = float(header.scale_factor)
     analog_words = int(header.analog_count)
-    data_block = int(_number_param(reader, "POINT:DATA_START") or header.data_block)
-    if data_block != header.data_block and header.data_block > 1:
-        data_block = int(header.data_block)
+    data_block = int(header.data_block if header.data_block > 1 else _number_param(reader, "POINT:DATA_START") or 2)
     layout = _Layout(processor, scale < 0, abs(scale) or 1.0, n_points, analog_words,
                      (data_block - 1) * BLOCK, 0)
     frame_bytes = layout.frame_words * layout.word_bytes
