@@ -51,6 +51,10 @@ class _Layout:
     def word_bytes(self) -> int:
         return 4 if self.is_real else 2
 
+    @property
+    def frame_bytes(self) -> int:
+        return self.frame_words * self.word_bytes
+
 
 def read_c3d(path: str | os.PathLike) -> Take:
     """Read a C3D file into a Take; positions in metres, NaN where missing.
@@ -296,7 +300,7 @@ def _layout(path: str, reader, file_size: int) -> _Layout:
     data_block = int(header.data_block if header.data_block > 1 else _number_param(reader, "POINT:DATA_START") or 2)
     layout = _Layout(processor, scale < 0, abs(scale) or 1.0, n_points, analog_words,
                      (data_block - 1) * BLOCK, 0)
-    frame_bytes = layout.frame_words * layout.word_bytes
+    frame_bytes = layout.frame_bytes
     available = max(file_size - layout.data_offset, 0) // frame_bytes if frame_bytes else 0
     declared = int(header.last_frame) - int(header.first_frame) + 1
     # The header's frame fields are 16 bits: longer takes state their length in parameters.
@@ -336,7 +340,7 @@ def _read_samples(fh, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
         dtype = np.dtype(">f4" if layout.is_real else ">i2")
     else:
         dtype = np.dtype("<f4" if layout.is_real else "<i2")
-    frame_bytes = layout.frame_words * layout.word_bytes
+    frame_bytes = layout.frame_bytes
     fh.seek(layout.data_offset)
     for f0 in range(0, n_f, CHUNK_FRAMES):
         nf = min(CHUNK_FRAMES, n_f - f0)
