@@ -42,6 +42,16 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--names", default="*", metavar="PATTERN",
                      help="import only points whose name matches (* and ? wildcards)")
     imp.add_argument("--summary", metavar="OUT.json", help="also write a JSON summary of the import")
+
+    syn = sub.add_parser("synth", help="generate a synthetic raw take of a procedural hand, with its ground truth")
+    syn.add_argument("--layout", default="han19", help="built-in layout name or a layout .toml file (default han19)")
+    syn.add_argument("--frames", type=int, default=2000, help="number of frames (default 2000)")
+    syn.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same bytes")
+    syn.add_argument("--rate", type=float, default=120.0, help="frames per second (default 120)")
+    syn.add_argument("--side", choices=("left", "right"), help="hand side (default: drawn at random)")
+    syn.add_argument("--clean", action="store_true", help="no noise, occlusion, ghosts or merges")
+    syn.add_argument("-o", "--output", required=True, metavar="OUT.c3d",
+                     help="the take to write; the truth goes beside it as OUT.truth.npz")
     return parser
 
 
@@ -57,7 +67,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "import" and not args.blend.lower().endswith(".blend"):
         print(f"mocap_autolabel import: error: --blend must name a .blend file, got {args.blend!r}", file=sys.stderr)
         return EXIT_USAGE
-    command = {"info": _info, "import": _import}[args.command]
+    if args.command == "synth" and not (1 <= args.frames <= 10_000_000 and 1 <= args.rate <= 10_000):
+        print("mocap_autolabel synth: error: --frames must be 1 to 10,000,000 and --rate 1 to 10,000", file=sys.stderr)
+        return EXIT_USAGE
+    command = {"info": _info, "import": _import, "synth": _synth}[args.command]
     return command(args)
 
 
@@ -135,6 +148,32 @@ def _import(args) -> int:
     print(f"{args.file}: {summary['empties']} markers x {take.n_frames} frames -> {args.blend}")
     for warning in take.warnings:
         print(f"  warning  {warning}")
+    return EXIT_OK
+
+
+def _synth(args) -> int:
+    import dataclasses
+
+    from .core.layout import load_layout
+    from .core.synth.generate import GHOST, SynthConfig, clean_config, save_synth, synthesize
+
+    try:
+        layout = load_layout(args.layout)
+    except Exception as exc:
+        return _fail(args.layout, exc)
+    config = dataclasses.replace(clean_config() if args.clean else SynthConfig(), rate=args.rate, side=args.side)
+    synth = synthesize(layout, args.frames, seed=args.seed, config=config)
+    try:
+        take_path, truth_path = save_synth(synth, args.output)
+    except OSError as exc:
+        print(f"error: {args.output}: cannot write ({exc.strerror or exc})", file=sys.stderr)
+        return EXIT_FAILED
+    labels = synth.labels
+    print(f"{take_path}: {layout.name} ({len(layout)} markers), {args.frames} frames at {args.rate:g} Hz, "
+          f"{synth.hand.side} hand {synth.hand.length * 1000:.0f} x {synth.hand.breadth * 1000:.0f} mm, "
+          f"{synth.take.n_points} slots, {100 * synth.take.missing_fraction:.1f} % of slot samples empty, "
+          f"{(labels == GHOST).sum() / args.frames:.2f} ghosts per frame")
+    print(f"  truth    {truth_path}")
     return EXIT_OK
 
 

@@ -1,0 +1,76 @@
+"""Rotation helpers, vectorised over leading axes: axis rotations, rotation vectors, quaternions.
+
+Quaternions are ``(w, x, y, z)`` as Blender stores them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def rot_x(angle: np.ndarray) -> np.ndarray:
+    """Rotations about x: ``(...,) -> (..., 3, 3)``."""
+    c, s = np.cos(angle), np.sin(angle)
+    o, z = np.ones_like(c), np.zeros_like(c)
+    return np.stack([o, z, z, z, c, -s, z, s, c], axis=-1).reshape(*np.shape(angle), 3, 3)
+
+
+def rot_y(angle: np.ndarray) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    o, z = np.ones_like(c), np.zeros_like(c)
+    return np.stack([c, z, s, z, o, z, -s, z, c], axis=-1).reshape(*np.shape(angle), 3, 3)
+
+
+def rot_z(angle: np.ndarray) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    o, z = np.ones_like(c), np.zeros_like(c)
+    return np.stack([c, -s, z, s, c, z, z, z, o], axis=-1).reshape(*np.shape(angle), 3, 3)
+
+
+def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
+    """Rodrigues: rotation vectors ``(..., 3)`` (axis times angle, radians) to matrices ``(..., 3, 3)``."""
+    rotvec = np.asarray(rotvec, dtype=float)
+    theta = np.linalg.norm(rotvec, axis=-1)[..., None, None]
+    k = np.zeros(rotvec.shape[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -rotvec[..., 2], rotvec[..., 1], -rotvec[..., 0]
+    k = k - np.swapaxes(k, -1, -2)
+    small = theta < 1e-8
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)
+    return np.eye(3) + a * k + b * (k @ k)
+
+
+def matrix_to_rotvec(matrix: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`rotvec_to_matrix` for ``(..., 3, 3)``, via quaternions (stable near pi)."""
+    m = np.asarray(matrix, dtype=float)
+    w = np.sqrt(np.clip(1.0 + m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2], 0, None)) / 2
+    x = np.copysign(np.sqrt(np.clip(1.0 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2], 0, None)) / 2,
+                    m[..., 2, 1] - m[..., 1, 2])
+    y = np.copysign(np.sqrt(np.clip(1.0 - m[..., 0, 0] + m[..., 1, 1] - m[..., 2, 2], 0, None)) / 2,
+                    m[..., 0, 2] - m[..., 2, 0])
+    z = np.copysign(np.sqrt(np.clip(1.0 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2], 0, None)) / 2,
+                    m[..., 1, 0] - m[..., 0, 1])
+    v = np.stack([x, y, z], axis=-1)
+    s = np.linalg.norm(v, axis=-1)
+    angle = 2 * np.arctan2(s, w)
+    return v * np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0)[..., None]
+
+
+def matrix_to_quaternion(matrix: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` to unit quaternions ``(..., 4)`` (w, x, y, z), w >= 0."""
+    v = matrix_to_rotvec(matrix)
+    angle = np.linalg.norm(v, axis=-1, keepdims=True)
+    axis = v / np.where(angle > 1e-12, angle, 1.0)
+    return np.concatenate([np.cos(angle / 2), axis * np.sin(angle / 2)], axis=-1)
+
+
+def continuous_quaternions(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Flip signs along ``axis`` (time) so that consecutive quaternions lie in the same hemisphere,
+    which keeps interpolated keyframes from spinning the long way round."""
+    q = np.array(q, copy=True)
+    qt = np.moveaxis(q, axis, 0)
+    dots = np.sum(qt[1:] * qt[:-1], axis=-1)
+    flips = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
+    qt[1:] *= flips[..., None]
+    return q

@@ -1,0 +1,284 @@
+"""Synthetic raw takes with ground truth: the procedural hand, moved, marked, and corrupted.
+
+``synthesize(layout, frames, seed)`` is deterministic: the same arguments give the same arrays,
+and :func:`save_synth` writes the same bytes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import heapq
+import io
+import json
+import os
+import zipfile
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..atomic import atomic_output
+from ..formats.c3d import write_c3d
+from ..hand.skeleton import HandModel, sample_hand_size
+from ..hand.skin import Binding, blend, blend_directions
+from ..layout import Layout
+from ..take import Take
+from .corrupt import (
+    camera_ring,
+    camera_visibility,
+    flicker_ghosts,
+    gap_mask,
+    merge_close,
+    occluder_spheres,
+    persistent_ghosts,
+)
+from .motion import MotionConfig, generate_motion
+
+GHOST = -1  #: truth label of a ghost sample
+EMPTY = -2  #: truth label where a slot has no sample
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """Every knob of the generator, with defaults tuned against the real recordings
+    (see ``benchmarks/synth_realism.py``). Lengths in metres, times in seconds.
+
+    Set a ``*_per_*`` rate or count to 0 (or a flag to False) to switch that corruption off.
+    """
+
+    rate: float = 120.0
+    side: str | None = None  # "left", "right", or None for either at random
+    sex: str | None = None  # ANSUR population for the hand size; None: either at random
+    hand_size: tuple[float, float] | None = None  # (length, breadth) to fix the size
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    # noise and slip
+    noise_sd: tuple[float, float] = (0.0005, 0.0015)  # per-take SD drawn from this range
+    slip: tuple[float, float] = (0.002, 0.003)  # per-take, per-marker offset along the skin
+    # occlusion
+    cameras: bool = True
+    camera_count: tuple[int, int] = (8, 16)
+    min_views: int = 2
+    max_view_angle_deg: float = 80.0
+    random_gaps_per_minute: tuple[float, float] = (0.0, 6.0)  # per marker; per-take rate drawn from this
+    mean_gap_s: float = 0.15
+    # merges
+    merges: bool = True
+    # ghosts
+    flicker_ghosts_per_frame: tuple[float, float] = (0.0, 1.5)
+    ghost_spread: float = 0.05
+    ghost_box: float = 0.3
+    ghost_box_share: float = 0.3
+    ghost_mean_frames: float = 4.0
+    persistent_ghosts: tuple[int, int] = (0, 2)
+    persistent_ghost_s: tuple[float, float] = (1.0, 10.0)
+    persistent_ghost_distance: tuple[float, float] = (0.08, 0.25)
+
+
+def clean_config() -> SynthConfig:
+    """No corruption at all: every marker in every frame, exactly on the hand."""
+    return SynthConfig(noise_sd=(0.0, 0.0), slip=(0.0, 0.0), cameras=False, random_gaps_per_minute=(0.0, 0.0),
+                       merges=False, flicker_ghosts_per_frame=(0.0, 0.0), persistent_ghosts=(0, 0))
+
+
+@dataclass
+class SynthTake:
+    """A synthetic take and everything true about it.
+
+    Attributes:
+        take: the unlabeled take (``*N`` slots, metres, NaN where missing).
+        labels: int16 ``(F, S)`` truth per slot and frame: the layout index, :data:`GHOST` or :data:`EMPTY`.
+        layout: the layout the markers follow.
+        hand: the hand that moved.
+        poses: ``(F, 26)`` pose vectors.
+        markers: ``(F, M, 3)`` true marker centres (with slip, without noise or occlusion), metres.
+        seed: the seed it was made from.
+    """
+
+    take: Take
+    labels: np.ndarray
+    layout: Layout
+    hand: HandModel
+    poses: np.ndarray
+    markers: np.ndarray
+    seed: int
+    config: SynthConfig
+
+
+def synthesize(layout: Layout, frames: int, seed: int = 0, config: SynthConfig | None = None) -> SynthTake:
+    """Generate one synthetic unlabeled take of a hand wearing ``layout``.
+
+    Args:
+        layout: the marker layout.
+        frames: number of frames.
+        seed: random seed; the only source of randomness.
+        config: the generator's settings (defaults: realistic corruption).
+    """
+    if frames < 1:
+        raise ValueError(f"frames must be positive, got {frames}")
+    cfg = config or SynthConfig()
+    rng = np.random.default_rng(seed)
+    length, breadth = cfg.hand_size or sample_hand_size(rng, cfg.sex)
+    side = cfg.side or ("left" if rng.random() < 0.5 else "right")
+    hand = HandModel(length=length, breadth=breadth, side=side)
+
+    poses = generate_motion(rng, frames, cfg.rate, cfg.motion)
+    binding, normals = layout.place(hand)
+    binding = _slip(rng, binding, normals, cfg.slip)
+    skin_r, skin_t = (a.astype(np.float32) for a in hand.skinning_transforms(poses))  # float32: speed
+    markers = blend(skin_r, skin_t, binding).astype(np.float64)  # (F, M, 3)
+    n_markers = markers.shape[1]
+
+    # Occlusion: camera model and random gaps in runs.
+    missing = np.zeros((frames, n_markers), dtype=bool)
+    centre = markers.mean(axis=1)
+    if cfg.cameras:
+        world_normals = blend_directions(skin_r, binding, normals)
+        sphere_binding, radii = occluder_spheres(hand)
+        spheres = blend(skin_r, skin_t, sphere_binding)
+        volume_centre = 0.5 * (np.array(cfg.motion.volume_min) + np.array(cfg.motion.volume_max))
+        cams = camera_ring(rng, volume_centre, cfg.camera_count)
+        missing |= ~camera_visibility(markers, world_normals, spheres, radii, cams, cfg.min_views,
+                                      cfg.max_view_angle_deg)
+    gap_rate = rng.uniform(*cfg.random_gaps_per_minute) / 60.0 / cfg.rate
+    if gap_rate > 0:
+        missing |= gap_mask(rng, frames, n_markers, gap_rate, cfg.mean_gap_s * cfg.rate)
+
+    sd = rng.uniform(*cfg.noise_sd)
+    observed = markers + rng.normal(0.0, sd, size=markers.shape) if sd > 0 else markers.copy()
+    observed[missing] = np.nan
+    if cfg.merges:
+        diameter = 2 * min(m.radius for m in layout.markers)
+        observed, _ = merge_close(observed, diameter)
+
+    # Ghosts.
+    hand_rot = skin_r[:, 0].astype(np.float64)  # the palm's rest frame is the hand frame
+    tracks = [observed]
+    track_labels = list(range(n_markers))
+    n_persistent = int(rng.integers(cfg.persistent_ghosts[0], cfg.persistent_ghosts[1] + 1))
+    if n_persistent:
+        dur = (int(cfg.persistent_ghost_s[0] * cfg.rate), int(cfg.persistent_ghost_s[1] * cfg.rate))
+        pg = persistent_ghosts(rng, centre, hand_rot, n_persistent, dur, cfg.persistent_ghost_distance)
+        pg[gap_mask(rng, frames, n_persistent, 2.0 / cfg.rate, cfg.mean_gap_s * cfg.rate)] = np.nan
+        if sd > 0:
+            pg += rng.normal(0.0, sd, size=pg.shape)
+        tracks.append(pg)
+        track_labels += [GHOST] * n_persistent
+    flicker_rate = rng.uniform(*cfg.flicker_ghosts_per_frame)
+    flicker = []
+    if flicker_rate > 0:
+        flicker = flicker_ghosts(rng, centre, hand_rot, flicker_rate, cfg.ghost_spread, cfg.ghost_box,
+                                 cfg.ghost_box_share, cfg.ghost_mean_frames, max(sd, 1e-4))
+
+    positions, labels = _pack(rng, np.concatenate(tracks, axis=1), np.array(track_labels), flicker)
+    take = Take(positions=positions, names=[f"*{i}" for i in range(positions.shape[1])], rate=cfg.rate,
+                first_frame=1, source_units="m", vendor="mocap_autolabel synth")
+    return SynthTake(take, labels, layout, hand, poses, markers, seed, cfg)
+
+
+def _slip(rng: np.random.Generator, binding: Binding, normals: np.ndarray, slip: tuple[float, float]) -> Binding:
+    """Move each marker 2-3 mm along the skin in a random direction, once per take (placement error)."""
+    if slip[1] <= 0:
+        return binding
+    d = rng.standard_normal(normals.shape)
+    d -= np.sum(d * normals, axis=1, keepdims=True) * normals  # tangent to the skin
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    amount = rng.uniform(*slip, size=(len(normals), 1))
+    return Binding(binding.rest + d * amount, binding.bones, binding.weights)
+
+
+def _pack(rng: np.random.Generator, tracks: np.ndarray, track_labels: np.ndarray,
+          flicker: list[tuple[int, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Cut every track at its gaps and lay the runs into ``*N`` slots, as a capture system would.
+
+    Every run starts a new trajectory. To keep files small a slot is reused once its previous
+    run has ended (with at least one empty frame between), so a slot can hold several runs; the
+    runs are laid in order of their start, ties in random order, so slot order says nothing
+    about labels.
+
+    Returns:
+        positions float32 ``(F, S, 3)`` and truth labels int16 ``(F, S)``.
+    """
+    frames = tracks.shape[0]
+    valid = ~np.isnan(tracks[..., 0])
+    padded = np.zeros((frames + 2, valid.shape[1]), dtype=np.int8)
+    padded[1:-1] = valid
+    edges = np.diff(padded, axis=0).T  # (N, F + 1)
+    run_track, run_start = np.nonzero(edges == 1)
+    _, run_stop = np.nonzero(edges == -1)
+    n_tracks = len(run_track)
+    starts = np.concatenate([run_start, [a for a, _ in flicker]]).astype(np.int64)
+    stops = np.concatenate([run_stop, [a + len(p) for a, p in flicker]]).astype(np.int64)
+    order = np.lexsort((rng.random(len(starts)), starts))
+    slot_of = np.empty(len(starts), dtype=np.int64)
+    free: list[tuple[int, int]] = []  # (frame from which the slot is free, slot)
+    n_slots = 0
+    for i in order:
+        if free and free[0][0] < starts[i]:
+            _, slot = heapq.heappop(free)
+        else:
+            slot, n_slots = n_slots, n_slots + 1
+        slot_of[i] = slot
+        heapq.heappush(free, (int(stops[i]), slot))
+    positions = np.full((frames, n_slots, 3), np.nan, dtype=np.float32)
+    labels = np.full((frames, n_slots), EMPTY, dtype=np.int16)
+    for i in range(len(starts)):
+        a, b, slot = starts[i], stops[i], slot_of[i]
+        if i < n_tracks:
+            positions[a:b, slot] = tracks[a:b, run_track[i]]
+            labels[a:b, slot] = track_labels[run_track[i]]
+        else:
+            positions[a:b, slot] = flicker[i - n_tracks][1]
+            labels[a:b, slot] = GHOST
+    return positions, labels
+
+
+def truth_path(take_path: str | os.PathLike) -> str:
+    """Where the ground truth of a synthetic take is written: ``take.c3d`` -> ``take.truth.npz``."""
+    stem, _ = os.path.splitext(os.fspath(take_path))
+    return stem + ".truth.npz"
+
+
+def save_synth(synth: SynthTake, path: str | os.PathLike) -> tuple[str, str]:
+    """Write the take as C3D (``*N`` names, mm) and its truth beside it; both atomic and byte-stable.
+
+    The truth file is an ``.npz`` (``numpy.load``) with ``labels`` (F, S) int16, ``markers``
+    (F, M, 3) float32 metres, ``poses`` (F, 26) float32 and ``info``, a JSON string with the
+    layout's marker names, the hand, the seed and the generator settings.
+
+    Returns:
+        the paths written (take, truth).
+    """
+    path = os.fspath(path)
+    write_c3d(synth.take, path)
+    info = {
+        "layout": synth.layout.name,
+        "names": synth.layout.names,
+        "labels": {"ghost": GHOST, "empty": EMPTY},
+        "hand": {"length_m": synth.hand.length, "breadth_m": synth.hand.breadth, "side": synth.hand.side},
+        "seed": synth.seed,
+        "rate": synth.take.rate,
+        "config": dataclasses.asdict(synth.config),
+    }
+    arrays = {
+        "labels": synth.labels,
+        "markers": synth.markers.astype(np.float32),
+        "poses": synth.poses.astype(np.float32),
+        "info": np.array(json.dumps(info, sort_keys=True)),
+    }
+    out = truth_path(path)
+    with atomic_output(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        for key, arr in arrays.items():
+            # A fixed timestamp: numpy.savez stamps the current time, which breaks byte-identity.
+            entry = zipfile.ZipInfo(f"{key}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            entry.compress_type = zipfile.ZIP_DEFLATED
+            buf = io.BytesIO()
+            np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
+            z.writestr(entry, buf.getvalue())
+    return path, out
+
+
+def load_truth(path: str | os.PathLike) -> dict:
+    """Read a truth sidecar: ``labels``, ``markers``, ``poses`` arrays and the ``info`` dict."""
+    with np.load(os.fspath(path), allow_pickle=False) as z:
+        out = {k: z[k] for k in ("labels", "markers", "poses")}
+        out["info"] = json.loads(str(z["info"]))
+    return out
