@@ -14,11 +14,12 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
-## demo: import the bundled raw sample take; writes out/demo.blend and out/demo_summary.json
+## demo: import the bundled raw synthetic take, and rebuild it with the hand that made it
 demo: venv
 	$(BIN)/python -m mocap_autolabel info samples/demo_take.c3d
 	$(BIN)/python -m mocap_autolabel import samples/demo_take.c3d --blend out/demo.blend --summary out/demo_summary.json
-	@echo "demo: open out/demo.blend in Blender; summary in out/demo_summary.json"
+	$(BIN)/python -m mocap_autolabel synth --layout han19 --frames 1200 --seed 1 -o out/demo_take.c3d --blend out/demo_truth.blend
+	@echo "demo: open out/demo.blend (the raw take) and out/demo_truth.blend (raw take + the true hand)"
 
 ## test: ruff, then every test (real-data tests skip when ../shared/data is absent)
 test: venv lint
@@ -30,14 +31,16 @@ lint: venv
 ## bench: speed and memory reports under benchmarks/reports/
 bench: venv
 	$(BIN)/python benchmarks/import_speed.py
+	$(BIN)/python benchmarks/synth_speed.py
+	$(BIN)/python benchmarks/synth_realism.py
 
 ## extension: one validated Blender extension zip per platform in dist/
 extension: venv
 	$(BIN)/python tools/build_extension.py --output-dir dist
 
-## sample: regenerate the bundled demo take (deterministic, byte for byte)
+## sample: regenerate the bundled demo take and its truth (deterministic, byte for byte)
 sample: venv
-	$(BIN)/python tools/make_sample.py samples/demo_take.c3d
+	$(BIN)/python -m mocap_autolabel synth --layout han19 --frames 1200 --seed 1 -o samples/demo_take.c3d
 
 clean:
 	rm -rf $(VENV) dist out .pytest_cache .ruff_cache
@@ -46,4 +49,4 @@ clean:
 test-bpy42:
 	$(PYTHON) -m venv .venv42
 	.venv42/bin/python -m pip install -q "bpy==4.2.0" "numpy==1.26.4" ezc3d c3d pytest
-	.venv42/bin/python -m pytest -q tests/test_blender_import.py tests/test_cli.py
+	.venv42/bin/python -m pytest -q tests/test_blender_import.py tests/test_cli.py tests/test_blender_hand.py

@@ -115,6 +115,10 @@ out["animated"] = sorted(o.name for o in objects
                          if o.animation_data is not None and o.animation_data.action is not None)
 out["frame_ranges"] = {o.name: list(o.animation_data.action.frame_range) for o in objects
                        if o.animation_data is not None and o.animation_data.action is not None}
+import importlib
+layouts = importlib.import_module(module + ".core.layout")  # the TOML files ship inside the zip
+out["layouts"] = layouts.builtin_layouts()
+out["han19_markers"] = len(layouts.load_layout("han19"))
 print("RESULT " + json.dumps(out), flush=True)
 """
 
@@ -216,5 +220,7 @@ def test_install_enable_and_import_c3d(extension_zip: Path, tmp_path: Path) -> N
     assert found["collection"], found
     assert found["empties"] == ["A", "B", "C"]
     assert found["animated"] == ["A", "B", "C"]
+    assert {"han19", "glove13", "tips3", "tips5", "tips10"} <= set(found["layouts"])
+    assert found["han19_markers"] == 19
     for name, (start, end) in found["frame_ranges"].items():
         assert end - start >= 9 - 1e-6, (name, start, end)

@@ -52,6 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--clean", action="store_true", help="no noise, occlusion, ghosts or merges")
     syn.add_argument("-o", "--output", required=True, metavar="OUT.c3d",
                      help="the take to write; the truth goes beside it as OUT.truth.npz")
+    syn.add_argument("--blend", metavar="OUT.blend",
+                     help="also write a .blend with the raw markers and the true hand (armature, skin, markers)")
     return parser
 
 
@@ -64,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     except SystemExit as exc:  # --help
         return int(exc.code or 0)
-    if args.command == "import" and not args.blend.lower().endswith(".blend"):
+    if args.command in ("import", "synth") and args.blend and not args.blend.lower().endswith(".blend"):
         print(f"mocap_autolabel import: error: --blend must name a .blend file, got {args.blend!r}", file=sys.stderr)
         return EXIT_USAGE
     if args.command == "synth" and not (1 <= args.frames <= 10_000_000 and 1 <= args.rate <= 10_000):
@@ -174,6 +176,32 @@ def _synth(args) -> int:
           f"{synth.take.n_points} slots, {100 * synth.take.missing_fraction:.1f} % of slot samples empty, "
           f"{(labels == GHOST).sum() / args.frames:.2f} ghosts per frame")
     print(f"  truth    {truth_path}")
+    if args.blend:
+        return _synth_blend(synth, args.blend)
+    return EXIT_OK
+
+
+def _synth_blend(synth, path: str) -> int:
+    """The raw take as empties beside the hand that made it, keyed over the same frames."""
+    try:
+        import bpy
+    except ImportError:
+        print("error: --blend needs Blender: install the bpy module (pip install bpy==5.0.1)", file=sys.stderr)
+        return EXIT_FAILED
+    from .blender.armature import build_hand, key_poses
+    from .blender.scene import ImportOptions, build_take
+    from .core.atomic import atomic_output
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    build_take(synth.take, scene, ImportOptions())
+    truth = bpy.data.collections.new("Truth")
+    scene.collection.children.link(truth)
+    objs = build_hand(synth.hand, name="TrueHand", collection=truth, layout=synth.layout)
+    key_poses(objs["armature"], synth.hand, synth.poses, first_frame=synth.take.first_frame)
+    with atomic_output(path) as tmp:
+        bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
+    print(f"  blend    {path}")
     return EXIT_OK
 
 

@@ -280,5 +280,5 @@ def load_truth(path: str | os.PathLike) -> dict:
     """Read a truth sidecar: ``labels``, ``markers``, ``poses`` arrays and the ``info`` dict."""
     with np.load(os.fspath(path), allow_pickle=False) as z:
         out = {k: z[k] for k in ("labels", "markers", "poses")}
-        out["info"] = json.loads(str(z["info"]))
+        out["info"] = json.loads(z["info"].item())
     return out

@@ -1,0 +1,156 @@
+"""The procedural hand in Blender: an Armature, a skinned mesh and the layout's markers.
+
+Bones get exactly the core model's rest frames, and every pose is converted from the core's
+skinning transforms, so that Blender's armature deformation reproduces the core's linear blend
+skinning (a test holds them to 0.1 mm).
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from mathutils import Matrix
+
+from ..core.hand.skeleton import BONE_NAMES, PARENTS, HandModel
+from ..core.hand.skin import Binding, build_mesh
+from ..core.layout import Layout
+from ..core.rotations import continuous_quaternions, matrix_to_quaternion
+from . import animio
+
+
+def _rest_matrices(hand: HandModel) -> np.ndarray:
+    """``(20, 4, 4)`` bone rest matrices in armature space (the hand frame)."""
+    r0, p0 = hand.rest
+    out = np.zeros((len(BONE_NAMES), 4, 4))
+    out[:, :3, :3] = r0
+    out[:, :3, 3] = p0
+    out[:, 3, 3] = 1.0
+    return out
+
+
+def build_hand(hand: HandModel, name: str = "Hand", collection: bpy.types.Collection | None = None,
+               layout: Layout | None = None, mesh: bool = True) -> dict[str, bpy.types.Object]:
+    """Create the hand's armature (and skinned mesh, and marker points) in ``collection``.
+
+    Returns:
+        ``{"armature": obj, "mesh": obj or absent, "markers": obj or absent}``. The mesh and the
+        markers are children of the armature with an Armature modifier, deformed by the same
+        weights the core uses.
+    """
+    collection = collection or bpy.context.scene.collection
+    arm = bpy.data.armatures.new(name)
+    arm_obj = bpy.data.objects.new(name, arm)
+    collection.objects.link(arm_obj)
+    arm.display_type = "STICK"
+
+    # Edit bones need edit mode, which needs the object active in the view layer.
+    view_layer = bpy.context.view_layer
+    previous = view_layer.objects.active
+    view_layer.objects.active = arm_obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    rest = _rest_matrices(hand)
+    for b, bone_name in enumerate(BONE_NAMES):
+        eb = arm.edit_bones.new(bone_name)
+        eb.head = (0.0, 0.0, 0.0)
+        eb.tail = (0.0, float(hand.bone_lengths[b]), 0.0)
+        eb.matrix = Matrix(rest[b].tolist())
+        if PARENTS[b] >= 0:
+            eb.parent = arm.edit_bones[BONE_NAMES[PARENTS[b]]]
+            eb.use_connect = False
+    bpy.ops.object.mode_set(mode="OBJECT")
+    view_layer.objects.active = previous
+    for pb in arm_obj.pose.bones:
+        pb.rotation_mode = "QUATERNION"
+
+    out = {"armature": arm_obj}
+    if mesh:
+        skin = build_mesh(hand)
+        out["mesh"] = _skinned_object(f"{name}Skin", skin.binding, skin.faces, arm_obj, collection)
+    if layout is not None:
+        binding, _ = layout.place(hand)
+        obj = _skinned_object(f"{name}Markers", binding, None, arm_obj, collection)
+        obj["marker_names"] = layout.names
+        out["markers"] = obj
+    return out
+
+
+def _skinned_object(name: str, binding: Binding, faces: np.ndarray | None, arm_obj: bpy.types.Object,
+                    collection: bpy.types.Collection) -> bpy.types.Object:
+    me = bpy.data.meshes.new(name)
+    me.vertices.add(len(binding.rest))
+    me.vertices.foreach_set("co", binding.rest.astype(np.float32).ravel())
+    if faces is not None and len(faces):
+        me.loops.add(faces.size)
+        me.loops.foreach_set("vertex_index", faces.astype(np.int32).ravel())
+        me.polygons.add(len(faces))
+        me.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
+        me.polygons.foreach_set("loop_total", np.full(len(faces), 3, dtype=np.int32))
+    me.update()
+    me.validate()
+    obj = bpy.data.objects.new(name, me)
+    collection.objects.link(obj)
+    obj.parent = arm_obj
+    for b, bone_name in enumerate(BONE_NAMES):
+        group = obj.vertex_groups.new(name=bone_name)
+        for k in range(binding.bones.shape[1]):
+            sel = (binding.bones[:, k] == b) & (binding.weights[:, k] > 0)
+            # vertex_groups.add takes one weight per call: group the vertices by weight value.
+            for w in np.unique(binding.weights[sel, k]):
+                idx = np.flatnonzero(sel & (binding.weights[:, k] == w))
+                group.add(idx.tolist(), float(w), "ADD")
+    mod = obj.modifiers.new("Armature", "ARMATURE")
+    mod.object = arm_obj
+    mod.use_deform_preserve_volume = False  # plain linear blend skinning, as in the core
+    return obj
+
+
+def pose_bases(hand: HandModel, poses: np.ndarray, arm_obj: bpy.types.Object) -> np.ndarray:
+    """Pose-bone basis matrices ``(F, 20, 4, 4)`` that put the armature in ``poses (F, 26)``.
+
+    Computed against Blender's own rest matrices (``bone.matrix_local``), so any rounding in the
+    edit-bone roll cannot leak into the pose: Blender's pose matrix of bone b becomes
+    ``S_b @ rest_b`` with ``S_b`` the core's skinning transform.
+    """
+    r, t = hand.skinning_transforms(poses)
+    n = r.shape[0]
+    skin = np.zeros((n, len(BONE_NAMES), 4, 4))
+    skin[..., :3, :3] = r
+    skin[..., :3, 3] = t
+    skin[..., 3, 3] = 1.0
+    rest = np.array([np.array(arm_obj.data.bones[name].matrix_local) for name in BONE_NAMES])
+    posed = skin @ rest  # armature-space pose matrices
+    bases = np.empty_like(posed)
+    inv_rest = np.linalg.inv(rest)
+    for b, p in enumerate(PARENTS):
+        if p < 0:
+            bases[:, b] = inv_rest[b] @ posed[:, b]
+        else:
+            bases[:, b] = inv_rest[b] @ rest[p] @ np.linalg.inv(posed[:, p]) @ posed[:, b]
+    return bases
+
+
+def set_pose(arm_obj: bpy.types.Object, hand: HandModel, pose: np.ndarray) -> None:
+    """Put the armature in one pose (26,) without keyframes."""
+    bases = pose_bases(hand, np.asarray(pose)[None], arm_obj)[0]
+    for b, name in enumerate(BONE_NAMES):
+        arm_obj.pose.bones[name].matrix_basis = Matrix(bases[b].tolist())
+
+
+def key_poses(arm_obj: bpy.types.Object, hand: HandModel, poses: np.ndarray, first_frame: int = 1) -> None:
+    """Keyframe ``poses (F, 26)`` on frames ``first_frame ...`` in bulk: every bone's quaternion,
+    and the root bone's location. Keys are LINEAR: consecutive captured frames, nothing to ease."""
+    bases = pose_bases(hand, poses, arm_obj)
+    frames = np.arange(first_frame, first_frame + len(poses), dtype=np.float64)
+    quats = continuous_quaternions(matrix_to_quaternion(bases[..., :3, :3]), axis=0)
+    animio.ensure_action(arm_obj, f"{arm_obj.name}Action")
+    for b, name in enumerate(BONE_NAMES):
+        path = f'pose.bones["{name}"]'
+        for i in range(4):
+            fc = animio.find_fcurve(arm_obj, f"{path}.rotation_quaternion", i) or animio.new_fcurve(
+                arm_obj, f"{path}.rotation_quaternion", i, group=name)
+            animio.write_keys(fc, frames, quats[:, b, i])
+        if PARENTS[b] < 0:
+            for i in range(3):
+                fc = animio.find_fcurve(arm_obj, f"{path}.location", i) or animio.new_fcurve(
+                    arm_obj, f"{path}.location", i, group=name)
+                animio.write_keys(fc, frames, bases[:, b, i, 3])

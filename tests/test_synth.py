@@ -1,0 +1,167 @@
+"""The synthetic take generator: motion, corruption, fragmentation, ground truth, determinism."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import ROOT
+from mocap_autolabel.core.formats.c3d import read_c3d
+from mocap_autolabel.core.hand.skeleton import POSE_LIMITS
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.synth.corrupt import camera_visibility, gap_mask, merge_close
+from mocap_autolabel.core.synth.generate import (
+    EMPTY,
+    GHOST,
+    SynthConfig,
+    clean_config,
+    load_truth,
+    save_synth,
+    synthesize,
+)
+from mocap_autolabel.core.synth.motion import generate_motion
+from mocap_autolabel.core.tracklets import find_tracklets
+
+
+def _label_runs(labels, positions):
+    """(slot, start, stop, label set) for every run of samples in every slot."""
+    valid = ~np.isnan(positions[..., 0])
+    assert np.array_equal(valid, labels != EMPTY)  # truth and data agree on where samples are
+    out = []
+    for s in range(labels.shape[1]):
+        edges = np.diff(np.concatenate([[0], valid[:, s].astype(int), [0]]))
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            out.append((s, a, b, set(labels[a:b, s].tolist())))
+    return out
+
+
+def test_clean_take_is_exactly_the_skinned_markers():
+    layout = load_layout("han19")
+    synth = synthesize(layout, 300, seed=4, config=clean_config())
+    take, labels = synth.take, synth.labels
+    assert take.n_points == len(layout)  # nothing missing: one slot per marker, never cut
+    assert (labels != EMPTY).all() and not (labels == GHOST).any()
+    order = labels[0]
+    assert sorted(order.tolist()) == list(range(len(layout)))
+    assert np.allclose(take.positions, synth.markers[:, order], atol=1e-6)
+
+
+def test_corrupted_take_is_fragmented_and_truth_is_consistent():
+    layout = load_layout("han19")
+    synth = synthesize(layout, 3000, seed=7)
+    labels, take = synth.labels, synth.take
+    assert all(n.startswith("*") for n in take.names)
+    runs = _label_runs(labels, take.positions)
+    assert all(len(lab) == 1 for *_, lab in runs)  # a run never changes identity: new slot after every gap
+    # A marker is in at most one slot per frame.
+    for m in range(len(layout)):
+        assert (labels == m).sum(axis=1).max() <= 1
+    present = np.stack([(labels == m).any(axis=1) for m in range(len(layout))], axis=1)
+    assert 0.01 < 1 - present.mean() < 0.5  # some occlusion, not a wreck
+    assert (labels == GHOST).any()
+    # Observed samples are near the true marker (noise of at most a few mm, merges move them half a diameter).
+    f, s = np.nonzero(labels >= 0)
+    err = np.linalg.norm(take.positions[f, s] - synth.markers[f, labels[f, s]], axis=1)
+    assert np.percentile(err, 99) < 0.006
+    assert len(find_tracklets(take)) == len(runs)
+
+
+def test_same_seed_same_bytes_and_different_seed_differs(tmp_path):
+    layout = load_layout("glove13")
+    a = save_synth(synthesize(layout, 500, seed=11), tmp_path / "a" / "take.c3d")
+    b = save_synth(synthesize(layout, 500, seed=11), tmp_path / "b" / "take.c3d")
+    c = save_synth(synthesize(layout, 500, seed=12), tmp_path / "c" / "take.c3d")
+    for x, y in zip(a, b):
+        assert open(x, "rb").read() == open(y, "rb").read()
+    assert open(a[0], "rb").read() != open(c[0], "rb").read()
+
+
+def test_saved_take_and_truth_round_trip(tmp_path):
+    layout = load_layout("tips10")
+    synth = synthesize(layout, 400, seed=2, config=dataclasses.replace(SynthConfig(), side="left"))
+    take_path, truth_path = save_synth(synth, tmp_path / "t.c3d")
+    take = read_c3d(take_path)
+    truth = load_truth(truth_path)
+    assert take.names == synth.take.names
+    assert np.array_equal(take.valid, synth.take.valid)
+    assert np.nanmax(np.abs(take.positions - synth.take.positions)) < 1e-6
+    assert np.array_equal(truth["labels"], synth.labels)
+    assert truth["info"]["names"] == layout.names and truth["info"]["hand"]["side"] == "left"
+    assert truth["poses"].shape == (400, 26) and truth["markers"].shape == (400, 10, 3)
+
+
+def test_motion_is_smooth_inside_limits_and_volume():
+    rate = 120.0
+    poses = generate_motion(np.random.default_rng(1), 6000, rate)
+    joints = poses[:, 6:]
+    assert np.all(joints >= POSE_LIMITS[0, 6:] - 1e-12) and np.all(joints <= POSE_LIMITS[1, 6:] + 1e-12)
+    speed = np.degrees(np.abs(np.diff(joints, axis=0))).max() * rate
+    assert 50 < speed < 700  # deg/s: it moves, at human speeds (minimum jerk peaks at 1.875x the mean)
+    assert np.all(poses[:, 3:6] >= [-0.8, -0.8, 0.7]) and np.all(poses[:, 3:6] <= [0.8, 0.8, 1.6])
+    wrist_speed = np.linalg.norm(np.diff(poses[:, 3:6], axis=0), axis=1).max() * rate
+    assert wrist_speed < 2.0
+
+
+def test_gap_mask_makes_runs_of_the_asked_length():
+    mask = gap_mask(np.random.default_rng(0), 200_000, 3, 0.001, 12.0)
+    starts = np.diff(mask.astype(int), axis=0) == 1
+    lengths = mask.sum() / starts.sum()
+    assert 10 < lengths < 14  # overlapping gaps merge, so slightly above the mean of 12 is expected
+    assert 0.005 < mask.mean() < 0.02
+
+
+def test_merge_close_joins_markers_closer_than_a_diameter():
+    x = np.array([[[0, 0, 0], [0.004, 0, 0], [0.1, 0, 0]],
+                  [[0, 0, 0], [0.02, 0, 0], [np.nan] * 3]], dtype=float)
+    out, merged = merge_close(x, 0.006)
+    assert np.allclose(out[0, 0], [0.002, 0, 0]) and np.isnan(out[0, 1, 0]) and merged[0, 0]
+    assert np.allclose(out[1, :2], x[1, :2]) and not merged[1].any()
+
+
+def test_camera_visibility_blocks_and_grazing():
+    cams = np.array([[3.0, 0, 0], [3.0, 0.5, 0], [-3.0, 0, 0], [-3.0, 0.5, 0]])
+    markers = np.array([[[0, 0, 0], [0, 1, 0]]], dtype=float)
+    normals = np.array([[[1.0, 0, 0], [0, 0, 1.0]]])  # the second marker only grazes every camera
+    spheres = np.zeros((1, 1, 3))
+    far = camera_visibility(markers, normals, spheres + [0, 0, 5], np.array([0.05]), cams, every=1)
+    assert far.tolist() == [[True, False]]
+    # A sphere between the first marker and the two +x cameras hides it (the -x ones face away).
+    near = camera_visibility(markers, normals, spheres + [0.5, 0.1, 0], np.array([0.2]), cams, every=1)
+    assert near.tolist() == [[False, False]]
+
+
+def test_cli_synth_writes_take_and_truth(tmp_path):
+    out = tmp_path / "take.c3d"
+    cmd = [sys.executable, "-m", "mocap_autolabel", "synth", "--layout", "tips5", "--frames", "240", "--seed", "1",
+           "-o", str(out)]
+    run = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=_env())
+    assert run.returncode == 0, run.stderr
+    assert out.exists() and (tmp_path / "take.truth.npz").exists()
+    bad = subprocess.run(cmd[:5] + ["nolayout"] + cmd[6:], capture_output=True, text=True, cwd=ROOT, env=_env())
+    assert bad.returncode == 1 and bad.stderr.count("\n") == 1 and "nolayout" in bad.stderr
+
+
+def test_bundled_demo_take_comes_from_the_generator():
+    """samples/demo_take.c3d is `make sample`'s output: regenerate it and compare the data."""
+    synth = synthesize(load_layout("han19"), 1200, seed=1)
+    bundled = read_c3d(ROOT / "samples" / "demo_take.c3d")
+    assert bundled.names == synth.take.names
+    assert np.array_equal(bundled.valid, synth.take.valid)
+    assert np.nanmax(np.abs(bundled.positions - synth.take.positions)) < 1e-6
+    truth = load_truth(ROOT / "samples" / "demo_take.truth.npz")
+    assert np.array_equal(truth["labels"], synth.labels)
+
+
+def _env():
+    import os
+
+    return os.environ | {"PYTHONPATH": str(ROOT / "addon")}
+
+
+@pytest.mark.parametrize("layout", ["han19", "glove13", "tips3"])
+def test_every_builtin_layout_generates(layout):
+    synth = synthesize(load_layout(layout), 200, seed=0)
+    assert synth.markers.shape == (200, len(load_layout(layout)), 3)
