@@ -30,6 +30,7 @@ lint: venv
 
 ## bench: speed and memory reports under benchmarks/reports/
 bench: venv
+	$(BIN)/python -m pip install -q -e ".[bench]"
 	$(BIN)/python benchmarks/import_speed.py
 	$(BIN)/python benchmarks/synth_speed.py
 	$(BIN)/python benchmarks/synth_realism.py

@@ -14,7 +14,7 @@ from ..hand.skin import Binding
 
 
 def camera_ring(rng: np.random.Generator, center: np.ndarray, count: tuple[int, int] = (8, 16),
-                radius: tuple[float, float] = (3.0, 4.5), height: tuple[float, float] = (1.8, 2.8)) -> np.ndarray:
+                radius: tuple[float, float] = (2.0, 3.0), height: tuple[float, float] = (2.2, 3.0)) -> np.ndarray:
     """Camera positions ``(C, 3)`` in metres on a ring around ``center`` (the volume's middle, z up)."""
     n = int(rng.integers(count[0], count[1] + 1))
     azimuth = np.linspace(0, 2 * np.pi, n, endpoint=False) + rng.uniform(0, 2 * np.pi) + rng.normal(0, 0.1, n)

@@ -49,7 +49,8 @@ class SynthConfig:
     side: str | None = None  # "left", "right", or None for either at random
     sex: str | None = None  # ANSUR population for the hand size; None: either at random
     hand_size: tuple[float, float] | None = None  # (length, breadth) to fix the size
-    motion: MotionConfig = field(default_factory=MotionConfig)
+    # The back of the hand within 90 degrees of up, as performers mostly hold it (180: any way).
+    motion: MotionConfig = field(default_factory=lambda: MotionConfig(max_tilt_deg=90.0))
     # noise and slip
     noise_sd: tuple[float, float] = (0.0005, 0.0015)  # per-take SD drawn from this range
     slip: tuple[float, float] = (0.002, 0.003)  # per-take, per-marker offset along the skin
@@ -57,9 +58,9 @@ class SynthConfig:
     cameras: bool = True
     camera_count: tuple[int, int] = (8, 16)
     min_views: int = 2
-    max_view_angle_deg: float = 80.0
-    random_gaps_per_minute: tuple[float, float] = (0.0, 6.0)  # per marker; per-take rate drawn from this
-    mean_gap_s: float = 0.15
+    max_view_angle_deg: float = 85.0  # a raised spherical marker is seen a little past 80 degrees
+    random_gaps_per_minute: tuple[float, float] = (0.0, 2.0)  # per marker; per-take rate drawn from this
+    mean_gap_s: float = 0.25
     # merges
     merges: bool = True
     # ghosts

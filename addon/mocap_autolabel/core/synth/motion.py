@@ -21,8 +21,9 @@ from .poses import sample_joint_angles
 class MotionConfig:
     """Speeds and ranges of the synthetic motion (SI units: m, s, degrees where named)."""
 
-    volume_min: tuple[float, float, float] = (-0.8, -0.8, 0.7)  # m, the capture volume the wrist stays in
-    volume_max: tuple[float, float, float] = (0.8, 0.8, 1.6)
+    volume_min: tuple[float, float, float] = (-0.5, -0.5, 0.8)  # m, the capture volume the wrist stays in
+    volume_max: tuple[float, float, float] = (0.5, 0.5, 1.4)
+    max_tilt_deg: float = 180.0  # how far the back of the hand may turn from facing up (180: any way)
     joint_speed_deg: tuple[float, float] = (60.0, 300.0)  # peak-ish speed of the fastest joint
     turn_deg: float = 60.0  # largest orientation change between key poses
     turn_speed_deg: tuple[float, float] = (45.0, 180.0)
@@ -49,6 +50,33 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     ])
 
 
+def _turn(rng: np.random.Generator, rot: np.ndarray, cfg: MotionConfig, tries: int = 20) -> np.ndarray:
+    """A random turn (rotation vector, world frame, applied on the right) of at most ``turn_deg``
+    that keeps the back of the hand within ``max_tilt_deg`` of facing up."""
+    cos_max = np.cos(np.radians(cfg.max_tilt_deg))
+    for _ in range(tries):
+        axis = rng.standard_normal(3)
+        turn = np.radians(rng.uniform(0, cfg.turn_deg)) * axis / np.linalg.norm(axis)
+        if (rot @ rotvec_to_matrix(turn))[2, 2] >= cos_max - 1e-9:
+            return turn
+    # Nothing drawn fits: turn the back of the hand straight towards up instead.
+    dorsal = rot[:, 2]
+    axis_world = np.cross(dorsal, [0.0, 0.0, 1.0])
+    norm = np.linalg.norm(axis_world)
+    if norm < 1e-9:
+        return np.zeros(3)
+    angle = min(np.radians(cfg.turn_deg), np.arccos(np.clip(dorsal[2], -1, 1)))
+    return rot.T @ (axis_world / norm * angle)
+
+
+def _upright(rng: np.random.Generator, cfg: MotionConfig) -> np.ndarray:
+    """A random orientation with the back of the hand within ``max_tilt_deg`` of up, any heading."""
+    cos_tilt = rng.uniform(np.cos(np.radians(cfg.max_tilt_deg)), 1.0)
+    az = rng.uniform(0, 2 * np.pi)
+    tilt = np.arccos(cos_tilt) * np.array([np.cos(az), np.sin(az), 0.0])
+    return rotvec_to_matrix(tilt) @ rotvec_to_matrix(np.array([0.0, 0.0, rng.uniform(0, 2 * np.pi)]))
+
+
 def generate_motion(rng: np.random.Generator, frames: int, rate: float = 120.0,
                     config: MotionConfig | None = None) -> np.ndarray:
     """A smooth random hand motion.
@@ -68,14 +96,13 @@ def generate_motion(rng: np.random.Generator, frames: int, rate: float = 120.0,
     out = np.empty((frames, N_DOF))
     n_keys = max(4, int(frames / rate * 3) + 4)  # more than enough: transitions last >= 0.2 s
     angles = sample_joint_angles(rng, n_keys)
-    rot = random_rotation(rng)
+    rot = random_rotation(rng) if cfg.max_tilt_deg >= 180 else _upright(rng, cfg)
     pos = rng.uniform(lo, hi)
     f, k = 0, 0
     while f < frames:
         k = min(k + 1, n_keys - 1)
         a0, a1 = angles[k - 1], angles[k]
-        axis = rng.standard_normal(3)
-        turn = np.radians(rng.uniform(0, cfg.turn_deg)) * axis / np.linalg.norm(axis)
+        turn = _turn(rng, rot, cfg)
         pos1 = np.clip(pos + cfg.step_m * rng.standard_normal(3), lo, hi)
         duration = max(
             cfg.min_transition_s,
