@@ -165,3 +165,17 @@ def _env():
 def test_every_builtin_layout_generates(layout):
     synth = synthesize(load_layout(layout), 200, seed=0)
     assert synth.markers.shape == (200, len(load_layout(layout)), 3)
+
+
+def test_fill_short_gaps_bridges_only_short_inner_gaps():
+    from mocap_autolabel.core.synth.corrupt import fill_short_gaps
+
+    missing = np.zeros((30, 2), dtype=bool)
+    missing[5:8, 0] = True  # 3 frames: bridged
+    missing[12:20, 0] = True  # 8 frames: kept
+    missing[0:2, 1] = True  # touches the start: kept
+    missing[28:, 1] = True  # touches the end: kept
+    out = fill_short_gaps(missing, 4)
+    assert not out[5:8, 0].any() and out[12:20, 0].all()
+    assert out[0:2, 1].all() and out[28:, 1].all()
+    assert out.sum() == 8 + 2 + 2

@@ -72,6 +72,8 @@ def blend(rotations: np.ndarray, translations: np.ndarray, binding: Binding) -> 
     """
     w0, w1 = binding.weights[:, 0], binding.weights[:, 1]
     b0, b1 = binding.bones[:, 0], binding.bones[:, 1]
+    if not w1.any():  # rigidly bound points: no blending to do
+        return (rotations[:, b0] @ binding.rest[:, :, None])[..., 0] + translations[:, b0]
     # Blend the matrices first (F, N, 3, 3): cheaper than transforming by every bone.
     r = rotations[:, b0] * w0[None, :, None, None] + rotations[:, b1] * w1[None, :, None, None]
     t = translations[:, b0] * w0[None, :, None] + translations[:, b1] * w1[None, :, None]

@@ -14,8 +14,12 @@ from ..hand.skin import Binding
 
 
 def camera_ring(rng: np.random.Generator, center: np.ndarray, count: tuple[int, int] = (8, 16),
-                radius: tuple[float, float] = (2.0, 3.0), height: tuple[float, float] = (2.2, 3.0)) -> np.ndarray:
-    """Camera positions ``(C, 3)`` in metres on a ring around ``center`` (the volume's middle, z up)."""
+                radius: tuple[float, float] = (2.0, 3.0), height: tuple[float, float] = (0.6, 2.6)) -> np.ndarray:
+    """Camera positions ``(C, 3)`` in metres on a ring around ``center`` (the volume's middle, z up).
+
+    Heights spread from below to above the hand, as hand-capture rigs mount cameras low and high
+    so that curled fingertips stay in view.
+    """
     n = int(rng.integers(count[0], count[1] + 1))
     azimuth = np.linspace(0, 2 * np.pi, n, endpoint=False) + rng.uniform(0, 2 * np.pi) + rng.normal(0, 0.1, n)
     r = rng.uniform(*radius, n)
@@ -64,19 +68,41 @@ def camera_visibility(markers: np.ndarray, normals: np.ndarray, centres: np.ndar
     cam = cameras.astype(np.float32)
     r2 = (radii.astype(np.float32) ** 2)[None, None, :]
     cos_max = np.float32(np.cos(np.radians(max_angle_deg)))
+    n = np.asarray(normals[idx], dtype=np.float32)
     views = np.zeros((len(idx), m.shape[1]), dtype=np.int16)
-    for c in cam:
-        to_m = m - c  # (f, M, 3) camera to marker
+    active = np.arange(len(idx))  # frames in which some marker still lacks min_views cameras
+    # Cameras from around the ring in interleaved order: varied views first, so most frames are
+    # settled early and later cameras only work on the few frames with an occluded marker.
+    order = np.argsort(_bit_reversed(len(cam)))
+    for c in cam[order]:
+        ma, sa = m[active], s[active]
+        to_m = ma - c  # (f, M, 3) camera to marker
         dist_m = np.linalg.norm(to_m, axis=-1)
         u = to_m / dist_m[..., None]
-        facing = -np.einsum("fmk,fmk->fm", u, normals[idx].astype(np.float32)) > cos_max
-        to_s = s - c  # (f, S, 3)
+        facing = -np.einsum("fmk,fmk->fm", u, n[active]) > cos_max
+        to_s = sa - c  # (f, S, 3)
         t = u @ np.swapaxes(to_s, 1, 2)  # (f, M, S): depth of each sphere along each line of sight
         perp2 = np.einsum("fsk,fsk->fs", to_s, to_s)[:, None, :] - t * t
         blocked = ((t < dist_m[..., None]) & (perp2 < r2)).any(axis=-1)
-        views += facing & ~blocked
+        views[active] += facing & ~blocked
+        active = active[(views[active] < min_views).any(axis=1)]
+        if active.size == 0:
+            break
     seen = views >= min_views
     return np.repeat(seen, every, axis=0)[:n_frames]
+
+
+def _bit_reversed(n: int) -> np.ndarray:
+    """Keys that order 0..n-1 as 0, n/2, n/4, 3n/4, ... (van der Corput): spread-out first."""
+    keys = np.zeros(n)
+    for i in range(n):
+        x, f, k = 0.0, 0.5, i
+        while k:
+            x += f * (k & 1)
+            k >>= 1
+            f /= 2
+        keys[i] = x
+    return np.argsort(np.argsort(keys)) if n else keys.astype(int)
 
 
 def gap_mask(rng: np.random.Generator, frames: int, columns: int, gaps_per_frame: np.ndarray | float,
@@ -98,6 +124,29 @@ def gap_mask(rng: np.random.Generator, frames: int, columns: int, gaps_per_frame
     np.add.at(missing, (start, col), 1)
     np.add.at(missing, (stop, col), -1)
     return np.cumsum(missing, axis=0)[:frames] > 0
+
+
+def fill_short_gaps(missing: np.ndarray, max_length: int) -> np.ndarray:
+    """Close gaps of at most ``max_length`` frames, as capture software bridges them on export.
+
+    Args:
+        missing: bool ``(F, N)``, True where missing.
+
+    Returns:
+        a new mask; gaps touching the first or last frame are kept (nothing to bridge from).
+    """
+    out = missing.copy()
+    if max_length <= 0:
+        return out
+    padded = np.zeros((missing.shape[0] + 2, missing.shape[1]), dtype=np.int8)
+    padded[1:-1] = missing
+    edges = np.diff(padded, axis=0).T  # (N, F + 1)
+    col, start = np.nonzero(edges == 1)
+    _, stop = np.nonzero(edges == -1)
+    short = (stop - start <= max_length) & (start > 0) & (stop < missing.shape[0])
+    for c, a, b in zip(col[short], start[short], stop[short]):
+        out[a:b, c] = False
+    return out
 
 
 def merge_close(positions: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:

@@ -25,6 +25,7 @@ from ..take import Take
 from .corrupt import (
     camera_ring,
     camera_visibility,
+    fill_short_gaps,
     flicker_ghosts,
     gap_mask,
     merge_close,
@@ -59,8 +60,10 @@ class SynthConfig:
     camera_count: tuple[int, int] = (8, 16)
     min_views: int = 2
     max_view_angle_deg: float = 85.0  # a raised spherical marker is seen a little past 80 degrees
-    random_gaps_per_minute: tuple[float, float] = (0.0, 2.0)  # per marker; per-take rate drawn from this
+    random_gaps_per_minute: tuple[float, float] = (0.0, 1.0)  # per marker; per-take rate drawn from this
     mean_gap_s: float = 0.25
+    fill_gaps_s: float = 0.15  # gaps this short are bridged, as capture software does on export (the
+    # real glove recording has no gap under 0.19 s)
     # merges
     merges: bool = True
     # ghosts
@@ -77,6 +80,7 @@ class SynthConfig:
 def clean_config() -> SynthConfig:
     """No corruption at all: every marker in every frame, exactly on the hand."""
     return SynthConfig(noise_sd=(0.0, 0.0), slip=(0.0, 0.0), cameras=False, random_gaps_per_minute=(0.0, 0.0),
+                       fill_gaps_s=0.0,
                        merges=False, flicker_ghosts_per_frame=(0.0, 0.0), persistent_ghosts=(0, 0))
 
 
@@ -142,6 +146,7 @@ def synthesize(layout: Layout, frames: int, seed: int = 0, config: SynthConfig |
     gap_rate = rng.uniform(*cfg.random_gaps_per_minute) / 60.0 / cfg.rate
     if gap_rate > 0:
         missing |= gap_mask(rng, frames, n_markers, gap_rate, cfg.mean_gap_s * cfg.rate)
+    missing = fill_short_gaps(missing, int(round(cfg.fill_gaps_s * cfg.rate)))
 
     sd = rng.uniform(*cfg.noise_sd)
     observed = markers + rng.normal(0.0, sd, size=markers.shape) if sd > 0 else markers.copy()
