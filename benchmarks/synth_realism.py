@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT / "addon"))
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
 from mocap_autolabel.core.synth.generate import SynthConfig, synthesize  # noqa: E402
 from mocap_autolabel.core.take import read_take  # noqa: E402
+from mocap_autolabel.core.tracklets import mask_runs  # noqa: E402
 
 DATA = Path(os.environ.get("MOCAP_DATA", ROOT.parent / "shared" / "data"))
 REPORTS = ROOT / "benchmarks" / "reports"
@@ -37,13 +38,9 @@ def gap_stats(present: np.ndarray, rate: float) -> dict:
     """Occlusion statistics of a presence mask ``(frames, markers)``."""
     frames, markers = present.shape
     minutes = frames / rate / 60
-    lengths, per_marker = [], []
-    for m in range(markers):
-        edges = np.diff(np.concatenate([[0], (~present[:, m]).astype(int), [0]]))
-        runs = np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)
-        lengths.extend((runs / rate).tolist())
-        per_marker.append(len(runs) / minutes)
-    lengths = np.array(lengths) if lengths else np.zeros(0)
+    column, start, stop = mask_runs(~present)
+    lengths = (stop - start) / rate
+    per_marker = np.bincount(column, minlength=markers) / minutes
     missing = 100 * (1 - present.mean(axis=0))
     return {
         "missing_mean_pct": float(missing.mean()),

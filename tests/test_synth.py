@@ -23,19 +23,14 @@ from mocap_autolabel.core.synth.generate import (
     synthesize,
 )
 from mocap_autolabel.core.synth.motion import generate_motion
-from mocap_autolabel.core.tracklets import find_tracklets
+from mocap_autolabel.core.tracklets import find_tracklets, mask_runs
 
 
 def _label_runs(labels, positions):
     """(slot, start, stop, label set) for every run of samples in every slot."""
     valid = ~np.isnan(positions[..., 0])
     assert np.array_equal(valid, labels != EMPTY)  # truth and data agree on where samples are
-    out = []
-    for s in range(labels.shape[1]):
-        edges = np.diff(np.concatenate([[0], valid[:, s].astype(int), [0]]))
-        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-            out.append((s, a, b, set(labels[a:b, s].tolist())))
-    return out
+    return [(s, a, b, set(labels[a:b, s].tolist())) for s, a, b in zip(*mask_runs(valid))]
 
 
 def test_clean_take_is_exactly_the_skinned_markers():

@@ -64,3 +64,12 @@ def test_tracklets_split_at_impossible_jump():
     tr = find_tracklets(take, max_speed=10.0)
     assert list(zip(tr.slot, tr.start, tr.stop)) == [(0, 0, 30), (1, 0, 12), (1, 12, 30)]
     np.testing.assert_array_equal(np.unique(tr.id_map(30, 2)[:, 1]), [1, 2])
+
+
+def test_mask_runs_finds_every_run_in_column_order():
+    from mocap_autolabel.core.tracklets import mask_runs
+
+    mask = np.array([[1, 0], [1, 1], [0, 1], [1, 0]], dtype=bool)
+    column, start, stop = mask_runs(mask)
+    assert list(zip(column, start, stop)) == [(0, 0, 2), (0, 3, 4), (1, 1, 3)]
+    assert all(len(a) == 0 for a in mask_runs(np.zeros((3, 2), dtype=bool)))

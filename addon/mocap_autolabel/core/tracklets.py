@@ -48,6 +48,20 @@ class Tracklets:
         return ids.T
 
 
+def mask_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Runs of True in every column of a bool ``(frames, columns)`` mask.
+
+    Returns:
+        column, start and stop (one past the end) int arrays, ordered by (column, start).
+    """
+    padded = np.zeros((mask.shape[0] + 2, mask.shape[1]), dtype=np.int8)
+    padded[1:-1] = mask
+    edges = np.diff(padded, axis=0).T  # (columns, frames + 1)
+    column, start = np.nonzero(edges == 1)
+    _, stop = np.nonzero(edges == -1)
+    return column, start, stop
+
+
 def find_tracklets(take: Take, max_speed: float | None = None) -> Tracklets:
     """Split every point slot of ``take`` into runs between gaps.
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..hand.skeleton import HandModel
 from ..hand.skin import Binding
+from ..tracklets import mask_runs
 
 
 def camera_ring(rng: np.random.Generator, center: np.ndarray, count: tuple[int, int] = (8, 16),
@@ -138,11 +139,7 @@ def fill_short_gaps(missing: np.ndarray, max_length: int) -> np.ndarray:
     out = missing.copy()
     if max_length <= 0:
         return out
-    padded = np.zeros((missing.shape[0] + 2, missing.shape[1]), dtype=np.int8)
-    padded[1:-1] = missing
-    edges = np.diff(padded, axis=0).T  # (N, F + 1)
-    col, start = np.nonzero(edges == 1)
-    _, stop = np.nonzero(edges == -1)
+    col, start, stop = mask_runs(missing)
     short = (stop - start <= max_length) & (start > 0) & (stop < missing.shape[0])
     for c, a, b in zip(col[short], start[short], stop[short]):
         out[a:b, c] = False

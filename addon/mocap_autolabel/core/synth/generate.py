@@ -22,6 +22,7 @@ from ..hand.skeleton import HandModel, sample_hand_size
 from ..hand.skin import Binding, blend, blend_directions
 from ..layout import Layout
 from ..take import Take
+from ..tracklets import mask_runs
 from .corrupt import (
     camera_ring,
     camera_visibility,
@@ -204,12 +205,7 @@ def _pack(rng: np.random.Generator, tracks: np.ndarray, track_labels: np.ndarray
         positions float32 ``(F, S, 3)`` and truth labels int16 ``(F, S)``.
     """
     frames = tracks.shape[0]
-    valid = ~np.isnan(tracks[..., 0])
-    padded = np.zeros((frames + 2, valid.shape[1]), dtype=np.int8)
-    padded[1:-1] = valid
-    edges = np.diff(padded, axis=0).T  # (N, F + 1)
-    run_track, run_start = np.nonzero(edges == 1)
-    _, run_stop = np.nonzero(edges == -1)
+    run_track, run_start, run_stop = mask_runs(~np.isnan(tracks[..., 0]))
     n_tracks = len(run_track)
     starts = np.concatenate([run_start, [a for a, _ in flicker]]).astype(np.int64)
     stops = np.concatenate([run_stop, [a + len(p) for a, p in flicker]]).astype(np.int64)
