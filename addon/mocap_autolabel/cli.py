@@ -69,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command in ("import", "synth") and args.blend and not args.blend.lower().endswith(".blend"):
         print(f"mocap_autolabel import: error: --blend must name a .blend file, got {args.blend!r}", file=sys.stderr)
         return EXIT_USAGE
+    if args.command == "synth" and not args.output.lower().endswith(".c3d"):
+        print(f"mocap_autolabel synth: error: -o must name a .c3d file, got {args.output!r}", file=sys.stderr)
+        return EXIT_USAGE
     if args.command == "synth" and not (1 <= args.frames <= 10_000_000 and 1 <= args.rate <= 10_000):
         print("mocap_autolabel synth: error: --frames must be 1 to 10,000,000 and --rate 1 to 10,000", file=sys.stderr)
         return EXIT_USAGE

@@ -114,14 +114,6 @@ def skin_point(hand: HandModel, bone: int, along: float, angle: float, lift: flo
     return r0[bone] @ local + p0[bone], r0[bone] @ normal_local
 
 
-def tip_point(hand: HandModel, bone: int, lift: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """The point at the end of a distal bone's cap (the fingertip), ``lift`` metres out."""
-    r0, p0 = hand.rest
-    radius = hand.bone_radii[bone, 1]
-    local = np.array([0.0, hand.bone_lengths[bone] + radius + lift, 0.0])
-    return r0[bone] @ local + p0[bone], r0[bone] @ np.array([0.0, 1.0, 0.0])
-
-
 @dataclass(frozen=True)
 class Mesh:
     """A triangle mesh bound to the skeleton: vertices are a :class:`Binding`, faces ``(T, 3)`` int."""

@@ -97,6 +97,7 @@ class SynthTake:
         poses: ``(F, 26)`` pose vectors.
         markers: ``(F, M, 3)`` true marker centres (with slip, without noise or occlusion), metres.
         seed: the seed it was made from.
+        config: the settings it was made with.
     """
 
     take: Take
