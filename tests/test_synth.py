@@ -137,6 +137,9 @@ def test_cli_synth_writes_take_and_truth(tmp_path):
     assert out.exists() and (tmp_path / "take.truth.npz").exists()
     bad = subprocess.run(cmd[:5] + ["nolayout"] + cmd[6:], capture_output=True, text=True, cwd=ROOT, env=_env())
     assert bad.returncode == 1 and bad.stderr.count("\n") == 1 and "nolayout" in bad.stderr
+    wrong = subprocess.run(cmd[:-1] + [str(tmp_path / "take.txt")], capture_output=True, text=True, cwd=ROOT,
+                           env=_env())
+    assert wrong.returncode == 2 and ".c3d" in wrong.stderr and not (tmp_path / "take.txt").exists()
 
 
 def test_bundled_demo_take_comes_from_the_generator():
