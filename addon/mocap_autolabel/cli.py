@@ -118,13 +118,28 @@ def _info(args) -> int:
     return status
 
 
-def _import(args) -> int:
+def _bpy_or_none(what: str):
+    """The bpy module, or None after telling the user how to get it."""
     try:
         import bpy
     except ImportError:
-        print("error: the import command needs Blender: install the bpy module (pip install bpy==5.0.1) "
-              "or run blender -b --python-exit-code 1 -P addon/mocap_autolabel/cli.py -- import ...",
-              file=sys.stderr)
+        print(f"error: {what} needs Blender: install the bpy module (pip install bpy==5.0.1) "
+              "or run blender -b --python-exit-code 1 -P addon/mocap_autolabel/cli.py -- ...", file=sys.stderr)
+        return None
+    return bpy
+
+
+def _save_blend(bpy, path: str) -> None:
+    """Save the open scene to ``path``, complete or not at all."""
+    from .core.atomic import atomic_output
+
+    with atomic_output(path) as tmp:
+        bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
+
+
+def _import(args) -> int:
+    bpy = _bpy_or_none("the import command")
+    if bpy is None:
         return EXIT_FAILED
     from .blender.scene import ImportOptions, build_take
     from .core.atomic import atomic_output
@@ -138,8 +153,7 @@ def _import(args) -> int:
     scene = bpy.context.scene
     options = ImportOptions(scale=args.scale, frame_offset=args.frame_offset, name_filter=args.names)
     collection = build_take(take, scene, options)
-    with atomic_output(args.blend) as tmp:
-        bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
+    _save_blend(bpy, args.blend)
     summary = take.summary() | {
         "blend": os.path.abspath(args.blend),
         "collection": collection.name,
@@ -186,14 +200,11 @@ def _synth(args) -> int:
 
 def _synth_blend(synth, path: str) -> int:
     """The raw take as empties beside the hand that made it, keyed over the same frames."""
-    try:
-        import bpy
-    except ImportError:
-        print("error: --blend needs Blender: install the bpy module (pip install bpy==5.0.1)", file=sys.stderr)
+    bpy = _bpy_or_none("synth --blend")
+    if bpy is None:
         return EXIT_FAILED
     from .blender.armature import build_hand, key_poses
     from .blender.scene import ImportOptions, build_take
-    from .core.atomic import atomic_output
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
@@ -202,8 +213,7 @@ def _synth_blend(synth, path: str) -> int:
     scene.collection.children.link(truth)
     objs = build_hand(synth.hand, name="TrueHand", collection=truth, layout=synth.layout)
     key_poses(objs["armature"], synth.hand, synth.poses, first_frame=synth.take.first_frame)
-    with atomic_output(path) as tmp:
-        bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
+    _save_blend(bpy, path)
     print(f"  blend    {path}")
     return EXIT_OK
 

@@ -18,13 +18,12 @@ from ..core.rotations import continuous_quaternions, matrix_to_quaternion
 from . import animio
 
 
-def _rest_matrices(hand: HandModel) -> np.ndarray:
-    """``(20, 4, 4)`` bone rest matrices in armature space (the hand frame)."""
-    r0, p0 = hand.rest
-    out = np.zeros((len(BONE_NAMES), 4, 4))
-    out[:, :3, :3] = r0
-    out[:, :3, 3] = p0
-    out[:, 3, 3] = 1.0
+def _homogeneous(rotations: np.ndarray, translations: np.ndarray) -> np.ndarray:
+    """``(..., 3, 3)`` and ``(..., 3)`` to 4x4 matrices ``(..., 4, 4)``."""
+    out = np.zeros(rotations.shape[:-2] + (4, 4))
+    out[..., :3, :3] = rotations
+    out[..., :3, 3] = translations
+    out[..., 3, 3] = 1.0
     return out
 
 
@@ -48,7 +47,7 @@ def build_hand(hand: HandModel, name: str = "Hand", collection: bpy.types.Collec
     previous = view_layer.objects.active
     view_layer.objects.active = arm_obj
     bpy.ops.object.mode_set(mode="EDIT")
-    rest = _rest_matrices(hand)
+    rest = _homogeneous(*hand.rest)  # armature space is the hand frame
     for b, bone_name in enumerate(BONE_NAMES):
         eb = arm.edit_bones.new(bone_name)
         eb.head = (0.0, 0.0, 0.0)
@@ -111,12 +110,7 @@ def pose_bases(hand: HandModel, poses: np.ndarray, arm_obj: bpy.types.Object) ->
     edit-bone roll cannot leak into the pose: Blender's pose matrix of bone b becomes
     ``S_b @ rest_b`` with ``S_b`` the core's skinning transform.
     """
-    r, t = hand.skinning_transforms(poses)
-    n = r.shape[0]
-    skin = np.zeros((n, len(BONE_NAMES), 4, 4))
-    skin[..., :3, :3] = r
-    skin[..., :3, 3] = t
-    skin[..., 3, 3] = 1.0
+    skin = _homogeneous(*hand.skinning_transforms(poses))
     rest = np.array([np.array(arm_obj.data.bones[name].matrix_local) for name in BONE_NAMES])
     posed = skin @ rest  # armature-space pose matrices
     bases = np.empty_like(posed)

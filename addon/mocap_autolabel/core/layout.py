@@ -91,12 +91,11 @@ class Layout:
         """
         rest, normals, bones, weights = [], [], [], []
         r0, p0 = hand.rest
-        thumb_side = 1.0 if hand.side == "left" else -1.0
         for m in self.markers:
             b = BONE_INDEX[m.bone]
             lift = m.radius + self.glove
             if m.offset is not None:
-                local = np.array(m.offset) * [thumb_side, 1, 1]
+                local = np.array(m.offset) * [hand.thumb_side, 1, 1]
                 pos = r0[b] @ local + p0[b]
                 normal = r0[b] @ (local / (np.linalg.norm(local) or 1.0))
                 along = local[1] / hand.bone_lengths[b]
@@ -104,7 +103,7 @@ class Layout:
                 a = np.radians(m.angle_deg)
                 z = PALM_HALF_THICKNESS_HB * hand.breadth + lift
                 normal = np.array([0.0, 0.0, np.cos(a)])  # palm markers: dorsal or palmar only
-                pos = np.array([thumb_side * m.across * hand.breadth, m.along * hand.length, 0.0]) + z * normal
+                pos = np.array([hand.thumb_side * m.across * hand.breadth, m.along * hand.length, 0.0]) + z * normal
                 along = m.along
             else:
                 pos, normal = skin_point(hand, b, m.along, np.radians(m.angle_deg), lift)

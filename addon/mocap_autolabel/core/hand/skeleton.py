@@ -129,6 +129,12 @@ class HandModel:
             raise ValueError(f"implausible hand size: length {self.length} m, breadth {self.breadth} m")
 
     # -- geometry -------------------------------------------------------------------------
+    @property
+    def thumb_side(self) -> float:
+        """+1 or -1: the sign of x towards the thumb in the hand and bone frames (a right hand's
+        frames are mirrored, so its x points away from the thumb)."""
+        return 1.0 if self.side == "left" else -1.0
+
     @cached_property
     def bone_lengths(self) -> np.ndarray:
         """``(20,)`` bone lengths in metres (the palm: wrist to the middle MCP joint)."""

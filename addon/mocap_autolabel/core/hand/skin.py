@@ -16,7 +16,11 @@ from .skeleton import BONE_NAMES, PALM_HALF_THICKNESS_HB, PARENTS, HandModel
 #: Fraction of a segment's length, at each end, over which the skin blends with the neighbour.
 BLEND_ZONE = 0.25
 
-_CHILD = {p: b for b, p in enumerate(PARENTS) if p > 0}  # the one child of every digit bone
+_PARENT = np.array(PARENTS)
+_CHILD = np.full(len(PARENTS), -1)  # the one child of every digit bone, -1 for tips and the palm
+for _b, _p in enumerate(PARENTS):
+    if _p > 0:
+        _CHILD[_p] = _b
 
 
 @dataclass(frozen=True)
@@ -46,8 +50,7 @@ def segment_weights(bone: np.ndarray, along: np.ndarray) -> tuple[np.ndarray, np
     """
     bone = np.asarray(bone, dtype=np.int64)
     along = np.asarray(along, dtype=float)
-    parent = np.array([PARENTS[b] for b in bone])
-    child = np.array([_CHILD.get(int(b), -1) for b in bone])
+    parent, child = _PARENT[bone], _CHILD[bone]
     near_base = (along < BLEND_ZONE) & (parent > 0)  # the palm is rigid: no blend into it
     near_tip = (along > 1 - BLEND_ZONE) & (child >= 0)
     other = np.where(near_base, parent, np.where(near_tip, child, bone))
@@ -70,14 +73,21 @@ def blend(rotations: np.ndarray, translations: np.ndarray, binding: Binding) -> 
     Returns:
         ``(F, N, 3)`` posed positions, metres.
     """
-    w0, w1 = binding.weights[:, 0], binding.weights[:, 1]
-    b0, b1 = binding.bones[:, 0], binding.bones[:, 1]
-    if not w1.any():  # rigidly bound points: no blending to do
-        return (rotations[:, b0] @ binding.rest[:, :, None])[..., 0] + translations[:, b0]
-    # Blend the matrices first (F, N, 3, 3): cheaper than transforming by every bone.
-    r = rotations[:, b0] * w0[None, :, None, None] + rotations[:, b1] * w1[None, :, None, None]
-    t = translations[:, b0] * w0[None, :, None] + translations[:, b1] * w1[None, :, None]
+    r, t = _blended(rotations, binding), _blended(translations, binding)
     return (r @ binding.rest[:, :, None])[..., 0] + t
+
+
+def _blended(per_bone: np.ndarray, binding: Binding) -> np.ndarray:
+    """Per-point weighted sum of per-bone arrays ``(F, B, ...) -> (F, N, ...)``.
+
+    Blending the matrices first is cheaper than transforming every point by both bones.
+    """
+    w0, w1 = binding.weights[:, 0], binding.weights[:, 1]
+    first = per_bone[:, binding.bones[:, 0]]
+    if not w1.any():  # rigidly bound points: no blending to do
+        return first
+    shape = (1, -1) + (1,) * (per_bone.ndim - 2)
+    return first * w0.reshape(shape) + per_bone[:, binding.bones[:, 1]] * w1.reshape(shape)
 
 
 def blend_directions(rotations: np.ndarray, binding: Binding, directions: np.ndarray) -> np.ndarray:
@@ -85,10 +95,7 @@ def blend_directions(rotations: np.ndarray, binding: Binding, directions: np.nda
 
     Returns ``(F, N, 3)`` unit vectors.
     """
-    w0, w1 = binding.weights[:, 0], binding.weights[:, 1]
-    r = rotations[:, binding.bones[:, 0]] * w0[None, :, None, None] + rotations[:, binding.bones[:, 1]] * w1[
-        None, :, None, None]
-    out = (r @ directions[:, :, None])[..., 0]
+    out = (_blended(rotations, binding) @ directions[:, :, None])[..., 0]
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
@@ -107,9 +114,7 @@ def skin_point(hand: HandModel, bone: int, along: float, angle: float, lift: flo
     """
     r0, p0 = hand.rest
     radius = np.interp(along, [0.0, 1.0], hand.bone_radii[bone])
-    # A right hand's bone frames are mirrored, so its local x points away from the thumb.
-    thumb_side = 1.0 if hand.side == "left" else -1.0
-    normal_local = np.array([thumb_side * np.sin(angle), 0.0, np.cos(angle)])
+    normal_local = np.array([hand.thumb_side * np.sin(angle), 0.0, np.cos(angle)])
     local = np.array([0.0, along * hand.bone_lengths[bone], 0.0]) + (radius + lift) * normal_local
     return r0[bone] @ local + p0[bone], r0[bone] @ normal_local
 

@@ -74,8 +74,7 @@ def camera_visibility(markers: np.ndarray, normals: np.ndarray, centres: np.ndar
     active = np.arange(len(idx))  # frames in which some marker still lacks min_views cameras
     # Cameras from around the ring in interleaved order: varied views first, so most frames are
     # settled early and later cameras only work on the few frames with an occluded marker.
-    order = np.argsort(_bit_reversed(len(cam)))
-    for c in cam[order]:
+    for c in cam[_interleaved(len(cam))]:
         ma, sa = m[active], s[active]
         to_m = ma - c  # (f, M, 3) camera to marker
         dist_m = np.linalg.norm(to_m, axis=-1)
@@ -93,17 +92,10 @@ def camera_visibility(markers: np.ndarray, normals: np.ndarray, centres: np.ndar
     return np.repeat(seen, every, axis=0)[:n_frames]
 
 
-def _bit_reversed(n: int) -> np.ndarray:
-    """Keys that order 0..n-1 as 0, n/2, n/4, 3n/4, ... (van der Corput): spread-out first."""
-    keys = np.zeros(n)
-    for i in range(n):
-        x, f, k = 0.0, 0.5, i
-        while k:
-            x += f * (k & 1)
-            k >>= 1
-            f /= 2
-        keys[i] = x
-    return np.argsort(np.argsort(keys)) if n else keys.astype(int)
+def _interleaved(n: int) -> np.ndarray:
+    """The indices 0..n-1 in van der Corput order (0, n/2, n/4, 3n/4, ...): spread out first."""
+    keys = [sum(((i >> k) & 1) / 2 ** (k + 1) for k in range(max(n, 1).bit_length())) for i in range(n)]
+    return np.argsort(keys, kind="stable")
 
 
 def gap_mask(rng: np.random.Generator, frames: int, columns: int, gaps_per_frame: np.ndarray | float,
