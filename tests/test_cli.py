@@ -77,3 +77,37 @@ def test_script_mode_like_blender_dash_p(tmp_path):
     result = _script("info", str(tmp_path / "missing.c3d"))
     assert result.returncode == 1 and result.stderr.strip().endswith("missing.c3d: no such file")
     assert _script().returncode == 2
+
+
+def test_label_demo_take_reports_accuracy_against_truth(capsys, tmp_path):
+    import numpy as np
+
+    out = tmp_path / "labels.npz"
+    assert main(["label", str(ROOT / "samples" / "demo_take.c3d"), "--method", "set", "--labels", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "set on han19, 1200 frames" in text and "% correct" in text
+    saved = np.load(out)
+    assert saved["labels"].shape == saved["confidence"].shape and saved["labels"].shape[0] == 1200
+    assert list(saved["names"])[:2] == ["ThumbCMC", "ThumbMCP"]
+
+
+def test_label_errors(capsys, tmp_path):
+    demo = str(ROOT / "samples" / "demo_take.c3d")
+    assert main(["label", demo, "--method", "gmm"]) == 2  # gmm needs --fit
+    assert "gmm needs --fit" in capsys.readouterr().err
+    assert main(["label", demo, "--model", str(tmp_path / "missing.onnx")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: {tmp_path / 'missing.onnx'}: model file not found"
+    assert main(["train", "--layout", "han19", "-o", "model.pt"]) == 2
+
+
+def test_train_command_writes_a_model_and_card(tmp_path, capsys):
+    pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch==2.13.0)")
+    pytest.importorskip("onnx", reason="onnx is not installed")
+    out = tmp_path / "tips3.onnx"
+    assert main(["train", "--layout", "tips3", "-o", str(out), "--steps", "20"]) == 0
+    captured = capsys.readouterr()
+    assert "ETA" in captured.err and "20/20 steps" in captured.err
+    card = json.loads((tmp_path / "tips3.json").read_text())
+    assert card["layout"]["name"] == "tips3" and card["method"] == "set"
+    assert main(["label", str(ROOT / "samples" / "demo_take.c3d"), "--layout", "tips3", "--model", str(out)]) == 0

@@ -54,6 +54,23 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the take to write; the truth goes beside it as OUT.truth.npz")
     syn.add_argument("--blend", metavar="OUT.blend",
                      help="also write a .blend with the raw markers and the true hand (armature, skin, markers)")
+
+    lab = sub.add_parser("label", help="label every frame of a take with one method (per-frame, no temporal step yet)")
+    lab.add_argument("file", metavar="FILE")
+    lab.add_argument("--method", default="set", choices=("set", "perm", "cnn", "gmm", "nearest"),
+                     help="labeling method (default: set, ours)")
+    lab.add_argument("--layout", default="han19", help="built-in layout name or a layout .toml (default han19)")
+    lab.add_argument("--model", metavar="MODEL.onnx", help="ONNX model for set/perm/cnn (default: the shipped one)")
+    lab.add_argument("--fit", metavar="LABELED",
+                     help="a labeled take of the subject: gmm fits on it; nearest starts from its first frame "
+                          "(default for nearest: set's labels of the first frame)")
+    lab.add_argument("--labels", metavar="OUT.npz", help="write labels and confidences per frame and point slot")
+
+    trn = sub.add_parser("train", help="train a 'set' model for a marker layout from synthetic data (needs PyTorch)")
+    trn.add_argument("--layout", required=True, help="built-in layout name or a layout .toml")
+    trn.add_argument("-o", "--output", required=True, metavar="OUT.onnx", help="the model; its card goes beside it")
+    trn.add_argument("--steps", type=int, help="training steps (default: the shipped recipe's)")
+    trn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     return parser
 
 
@@ -75,7 +92,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "synth" and not (1 <= args.frames <= 10_000_000 and 1 <= args.rate <= 10_000):
         print("mocap_autolabel synth: error: --frames must be 1 to 10,000,000 and --rate 1 to 10,000", file=sys.stderr)
         return EXIT_USAGE
-    command = {"info": _info, "import": _import, "synth": _synth}[args.command]
+    if args.command == "train" and not args.output.lower().endswith(".onnx"):
+        print(f"mocap_autolabel train: error: -o must name a .onnx file, got {args.output!r}", file=sys.stderr)
+        return EXIT_USAGE
+    command = {"info": _info, "import": _import, "synth": _synth, "label": _label, "train": _train}[args.command]
     return command(args)
 
 
@@ -167,6 +187,120 @@ def _import(args) -> int:
     print(f"{args.file}: {summary['empties']} markers x {take.n_frames} frames -> {args.blend}")
     for warning in take.warnings:
         print(f"  warning  {warning}")
+    return EXIT_OK
+
+
+def _label(args) -> int:
+    import numpy as np
+
+    from .core.labelers import assign, frames_from_take, make_labeler
+    from .core.layout import load_layout
+    from .core.synth.generate import load_truth, truth_path
+    from .core.take import read_take
+
+    try:
+        layout = load_layout(args.layout)
+        take = read_take(args.file)
+        batch = frames_from_take(take)
+        options = {}
+        if args.method in ("gmm", "nearest"):
+            labeled = _labeled_positions(read_take(args.fit), layout) if args.fit else None
+            if args.method == "gmm":
+                if labeled is None:
+                    raise _UsageError("gmm needs --fit LABELED: a labeled take of the subject to fit on")
+            elif labeled is not None:
+                options["start"] = labeled[0]
+            else:
+                seed = make_labeler("set", layout)
+                first, _ = assign(seed.scores(batch.points[:1], batch.mask[:1]), batch.mask[:1])
+                start = np.full((len(layout), 3), np.nan)
+                ok = first[0] >= 0
+                start[first[0][ok]] = batch.points[0][ok]
+                options["start"] = start
+        labeler = make_labeler(args.method, layout, args.model, **options)
+        if args.method == "gmm":
+            labeler.fit(labeled)
+        labels, confidence = labeler.label(batch)
+    except _UsageError as exc:
+        print(f"mocap_autolabel label: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as exc:
+        return _fail(args.file, exc)
+    valid = batch.mask
+    named = (labels >= 0) & valid
+    print(f"{args.file}: {args.method} on {layout.name}, {len(batch)} frames, {int(valid.sum()):,} observations; "
+          f"{100 * named.sum() / max(valid.sum(), 1):.1f} % labeled, "
+          f"{100 * (~named & valid).sum() / max(valid.sum(), 1):.1f} % null, "
+          f"mean confidence {confidence[valid].mean():.3f}")
+    tpath = truth_path(args.file)
+    if os.path.isfile(tpath):
+        from .core.metrics import score_labeling
+
+        truth = load_truth(tpath)["labels"]
+        t = np.where(batch.slots >= 0, truth[np.arange(len(batch))[:, None], np.maximum(batch.slots, 0)], -2)
+        t = np.where(valid & (t == -2), -1, t)
+        score = score_labeling(labels, t, valid, len(layout))
+        print(f"  truth    {tpath}: {100 * score.accuracy:.2f} % correct, {100 * score.frame_accuracy:.2f} % of frames "
+              f"all correct ({score.erroneous} erroneous, {score.false_marker} false marker, "
+              f"{score.false_occlusion} false occlusion)")
+    if args.labels:
+        from .core.atomic import atomic_output
+
+        per_slot = np.full((len(batch), take.n_points), -1, dtype=np.int16)
+        conf = np.zeros((len(batch), take.n_points), dtype=np.float32)
+        f, k = np.nonzero(valid)
+        per_slot[f, batch.slots[f, k]] = labels[f, k]
+        conf[f, batch.slots[f, k]] = confidence[f, k]
+        with atomic_output(args.labels) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, labels=per_slot, confidence=conf, names=np.array(layout.names))
+        print(f"  labels   {args.labels}")
+    return EXIT_OK
+
+
+def _labeled_positions(take, layout):
+    """``(F, M, 3)`` positions of a labeled take in layout order; every layout name must be present."""
+    from .core.errors import MocapInputError
+
+    where = {n: i for i, n in enumerate(take.names)}
+    missing = [n for n in layout.names if n not in where]
+    if missing:
+        raise MocapInputError(take.source, f"labeled take lacks layout markers {', '.join(missing[:5])}")
+    return take.positions[:, [where[n] for n in layout.names]].astype(float)
+
+
+def _train(args) -> int:
+    from .core.layout import load_layout
+
+    try:
+        layout = load_layout(args.layout)
+    except Exception as exc:
+        return _fail(args.layout, exc)
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    if os.path.isdir(os.path.join(root, "training")) and root not in sys.path:
+        sys.path.insert(0, root)  # a source checkout: training/ sits beside addon/
+    try:
+        from training.recipes import recipe
+        from training.train import export, train
+    except ImportError as exc:
+        print(f"error: training needs PyTorch and the training package of a source checkout "
+              f"(pip install torch==2.13.0; run from the repository): {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    import dataclasses
+
+    r = recipe("set", layout.name)
+    r = dataclasses.replace(r, seed=args.seed, steps=args.steps or r.steps)
+    print(f"training a set model for {layout.name} ({len(layout)} markers) on synthetic frames: {r.steps} steps",
+          file=sys.stderr)
+    net, metrics = train(layout, r)
+    try:
+        export(net, layout, r, metrics, args.output)
+    except OSError as exc:
+        print(f"error: {args.output}: cannot write ({exc.strerror or exc})", file=sys.stderr)
+        return EXIT_FAILED
+    v = metrics["synthetic_validation"]
+    print(f"{args.output}: synthetic validation {100 * v['accuracy']:.2f} % correct, card "
+          f"{os.path.splitext(args.output)[0]}.json")
     return EXIT_OK
 
 

@@ -1,0 +1,112 @@
+"""The labeler protocol: a batch of frames in, log-domain scores over labels plus "null" out.
+
+Every method (neural, GMM, nearest-neighbour) implements :meth:`Labeler.scores`; the shared
+:func:`~.assign.assign` step turns scores into labels, so temporal methods and the review tools
+never care which labeler made them.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..layout import Layout
+from ..take import Take
+
+#: Label index meaning "no marker of the layout" (a ghost, a distractor, a merged pair).
+NULL = -1
+
+
+@dataclass
+class FrameBatch:
+    """The observations of many frames, packed to the left and padded to ``K`` per frame.
+
+    Attributes:
+        points: float32 ``(F, K, 3)`` metres; 0 where ``mask`` is False.
+        mask: bool ``(F, K)``: True for a real observation.
+        slots: int32 ``(F, K)``: the take's point slot of each observation, -1 for padding.
+    """
+
+    points: np.ndarray
+    mask: np.ndarray
+    slots: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    def __getitem__(self, index: slice) -> FrameBatch:
+        return FrameBatch(self.points[index], self.mask[index], self.slots[index])
+
+
+def pack_frames(positions: np.ndarray, max_points: int | None = None) -> FrameBatch:
+    """Pack a take's ``(F, P, 3)`` positions (NaN = missing) into a :class:`FrameBatch`.
+
+    ``K`` is the largest number of valid points in any frame (at least 1), or ``max_points``
+    when given; frames with more valid points than ``max_points`` keep the ones nearest their
+    median point (the hand, when distractors are far away).
+    """
+    positions = np.asarray(positions, dtype=np.float32)
+    valid = np.isfinite(positions).all(axis=2)
+    frames, n_points = valid.shape
+    counts = valid.sum(axis=1)
+    k = max(1, int(counts.max(initial=0)))
+    if max_points is not None and k > max_points:
+        centre = np.nanmedian(np.where(valid[..., None], positions, np.nan), axis=1, keepdims=True)
+        dist = np.linalg.norm(np.nan_to_num(positions - centre, nan=np.inf), axis=2)
+        keep = np.argsort(np.where(valid, dist, np.inf), axis=1, kind="stable")[:, :max_points]
+        keep = np.sort(keep, axis=1)  # slot order, as without the limit
+        valid = np.take_along_axis(valid, keep, axis=1)
+        slots = keep
+        k = max_points
+    else:
+        slots = np.broadcast_to(np.arange(n_points), (frames, n_points))
+    # Stable sort puts valid samples first and keeps slot order among them.
+    order = np.argsort(~valid, axis=1, kind="stable")[:, :k]
+    slots = np.take_along_axis(slots, order, axis=1).astype(np.int32)
+    mask = np.take_along_axis(valid, order, axis=1)
+    points = np.take_along_axis(positions, slots[..., None].astype(np.int64), axis=1)
+    points = np.where(mask[..., None], points, 0.0).astype(np.float32)
+    slots[~mask] = -1
+    return FrameBatch(points, mask, slots)
+
+
+def frames_from_take(take: Take, max_points: int | None = None) -> FrameBatch:
+    """All frames of ``take`` as a :class:`FrameBatch` (see :func:`pack_frames`)."""
+    return pack_frames(take.positions, max_points)
+
+
+class Labeler(ABC):
+    """Scores every observation of a frame against the ``M`` labels of a layout and "null".
+
+    Subclasses set :attr:`layout` and implement :meth:`scores`. Frames are given in time order,
+    so trackers (``nearest``) may carry state from frame to frame within one call.
+    """
+
+    #: The method's name as the CLI and the add-on select it.
+    name: str = ""
+    layout: Layout
+
+    @abstractmethod
+    def scores(self, points: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """Log-domain scores.
+
+        Args:
+            points: float32 ``(F, K, 3)`` metres.
+            mask: bool ``(F, K)``.
+
+        Returns:
+            float32 ``(F, K, M + 1)``: column ``j < M`` scores label ``j``, column ``M`` scores
+            "null". Higher is better; rows of padded observations are ignored.
+        """
+
+    def label(self, batch: FrameBatch) -> tuple[np.ndarray, np.ndarray]:
+        """Per-frame labels and confidences of ``batch`` (see :func:`~.assign.assign`)."""
+        return self.label_points(batch.points, batch.mask)
+
+    def label_points(self, points: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Labels int16 ``(F, K)`` (:data:`NULL` for null) and confidences ``(F, K)`` of padded observations."""
+        from .assign import assign
+
+        return assign(self.scores(points, mask), mask)

@@ -1,0 +1,93 @@
+"""Labelers backed by an ONNX model and its JSON card (``set``, ``perm``, ``cnn``).
+
+The card names the layout the model was trained for and its input convention; the code that
+prepares inputs for each convention lives in :mod:`.inputs`, never next to the training code.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+
+import numpy as np
+
+from ..errors import MocapInputError
+from ..layout import Layout
+from .base import Labeler
+from .inputs import prepare_inputs, scores_from_outputs
+
+#: Where the shipped models live: ``<method>_<layout>.onnx`` beside ``<method>_<layout>.json``.
+MODELS_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "models")
+
+
+def card_path(model_path: str | os.PathLike) -> str:
+    return os.path.splitext(os.fspath(model_path))[0] + ".json"
+
+
+def shipped_model(method: str, layout_name: str) -> str:
+    """Path of the shipped model of ``method`` for a built-in layout (may not exist)."""
+    return os.path.join(MODELS_DIR, f"{method}_{layout_name}.onnx")
+
+
+def load_card(model_path: str | os.PathLike) -> dict:
+    """Read and check a model's card; the error names the model file."""
+    path = os.fspath(model_path)
+    if not os.path.isfile(path):
+        raise MocapInputError(path, "model file not found")
+    cpath = card_path(path)
+    try:
+        with open(cpath, encoding="utf-8") as f:
+            card = json.load(f)
+    except FileNotFoundError:
+        raise MocapInputError(path, f"model card {os.path.basename(cpath)} is missing beside the model") from None
+    except (OSError, ValueError) as e:
+        raise MocapInputError(path, f"model card {os.path.basename(cpath)} is unreadable ({e})") from None
+    for key in ("method", "layout", "input", "sha256"):
+        if key not in card:
+            raise MocapInputError(path, f"model card has no '{key}'")
+    return card
+
+
+class OnnxLabeler(Labeler):
+    """Scores from an ONNX model, run in batches with onnxruntime.
+
+    Args:
+        model_path: the ``.onnx`` file; its card ``.json`` must lie beside it.
+        layout: if given, the model must have been trained for exactly these label names.
+        batch: frames per inference call (bounded memory; a few hundred keeps tensors in cache).
+    """
+
+    def __init__(self, model_path: str | os.PathLike, layout: Layout | None = None, batch: int = 256):
+        import onnxruntime as ort
+
+        self.path = os.fspath(model_path)
+        self.card = load_card(self.path)
+        self.name = self.card["method"]
+        names = list(self.card["layout"].get("labels", []))
+        if layout is not None and names != layout.names:
+            raise MocapInputError(self.path, f"model is for layout '{self.card['layout'].get('name')}' "
+                                             f"({len(names)} labels), not for '{layout.name}' ({len(layout)} labels)")
+        self.layout = layout  # None: trust the card's label names
+        self.labels = names
+        with open(self.path, "rb") as f:
+            blob = f.read()
+        if hashlib.sha256(blob).hexdigest() != self.card["sha256"]:
+            raise MocapInputError(self.path, "model file is corrupt or was changed (checksum differs from its card)")
+        options = ort.SessionOptions()
+        options.log_severity_level = 3
+        try:
+            self.session = ort.InferenceSession(blob, options, providers=["CPUExecutionProvider"])
+        except Exception as e:  # onnxruntime raises its own types for bad graphs
+            raise MocapInputError(self.path, f"not a usable ONNX model ({str(e).splitlines()[0]})") from None
+        self.batch = batch
+
+    def scores(self, points: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        frames, k, _ = points.shape
+        out = np.empty((frames, k, len(self.labels) + 1), dtype=np.float32)
+        for s in range(0, frames, self.batch):
+            sl = slice(s, s + self.batch)
+            feeds, context = prepare_inputs(self.card, points[sl], mask[sl])
+            outputs = self.session.run(None, feeds)
+            out[sl] = scores_from_outputs(self.card, outputs, context, points[sl], mask[sl])
+        return out

@@ -1,0 +1,124 @@
+"""The shipped ONNX models: cards, checksums, invariances, errors; torch vs onnxruntime agreement."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+
+import numpy as np
+import pytest
+from mocap_autolabel.core.errors import MocapInputError
+from mocap_autolabel.core.labelers import ONNX_METHODS, assign, make_labeler
+from mocap_autolabel.core.labelers.onnx_labeler import OnnxLabeler, card_path, shipped_model
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.metrics import score_labeling
+from mocap_autolabel.core.synth.frames import FrameConfig, random_rotations, sample_frames
+
+SHIPPED = [(m, layout) for layout in ("han19", "glove13") for m in ONNX_METHODS]
+
+
+@pytest.mark.parametrize(("method", "layout_name"), SHIPPED)
+def test_shipped_model_card_matches_layout_and_file(method, layout_name):
+    path = shipped_model(method, layout_name)
+    card = json.load(open(card_path(path)))
+    assert card["method"] == method
+    assert card["layout"]["labels"] == load_layout(layout_name).names
+    assert card["sha256"] == hashlib.sha256(open(path, "rb").read()).hexdigest()
+    assert card["training"]["data"].startswith("synthetic")
+    assert 0 < card["metrics"]["train_seconds"] < 30 * 60  # the 30-minute budget on 2 cores
+    make_labeler(method, load_layout(layout_name))  # loads
+
+
+@pytest.mark.parametrize("method", ONNX_METHODS)
+def test_shipped_models_label_synthetic_frames(method):
+    layout = load_layout("han19")
+    cfg = FrameConfig(drop=(0, 2), ghosts=(0, 1), distractor_share=0.0)
+    fr = sample_frames(layout, 400, np.random.default_rng(123), cfg)
+    labels, conf = make_labeler(method, layout).label_points(fr.points, fr.mask)
+    s = score_labeling(labels, fr.labels, fr.mask, len(layout))
+    assert s.accuracy > 0.6  # far above chance (1/20); the benchmark reports the real figures
+    assert ((conf >= 0) & (conf <= 1)).all()
+
+
+def test_set_is_invariant_to_rotation_translation_mirroring_and_order():
+    layout = load_layout("glove13")
+    fr = sample_frames(layout, 64, np.random.default_rng(7))
+    labeler = make_labeler("set", layout)
+    base = labeler.scores(fr.points, fr.mask)
+    rng = np.random.default_rng(8)
+    rot = random_rotations(rng, 64) * np.array([-1.0, 1.0, 1.0])  # improper: mirrors, as a right hand does
+    moved = ((rot[:, None] @ fr.points[..., None].astype(np.float64))[..., 0] + rng.normal(size=(64, 1, 3))).astype(
+        np.float32)
+    order = np.argsort(rng.random(fr.mask.shape) + ~fr.mask * 2, axis=1)
+    shuffled = np.take_along_axis(moved, order[..., None], axis=1)
+    mask = np.take_along_axis(fr.mask, order, axis=1)
+    out = labeler.scores(shuffled, mask)
+    back = np.empty_like(out)
+    np.put_along_axis(back, order[..., None], out, axis=1)
+    valid = fr.mask
+    assert np.abs(np.exp(back[valid]) - np.exp(base[valid])).max() < 2e-3
+    a, _ = assign(base, valid)
+    b, _ = assign(back, valid)
+    assert (a == b).mean() > 0.99
+
+
+def test_model_errors_name_the_file(tmp_path):
+    layout = load_layout("han19")
+    src = shipped_model("set", "han19")
+    with pytest.raises(MocapInputError, match="model file not found") as e:
+        OnnxLabeler(tmp_path / "none.onnx", layout)
+    assert "none.onnx" in str(e.value)
+    # Corrupt: bytes changed after the card was written.
+    bad = tmp_path / "bad.onnx"
+    data = bytearray(open(src, "rb").read())
+    data[len(data) // 2] ^= 0xFF
+    bad.write_bytes(bytes(data))
+    shutil.copy(card_path(src), card_path(bad))
+    with pytest.raises(MocapInputError, match="corrupt"):
+        OnnxLabeler(bad, layout)
+    # Garbage with a matching checksum: onnxruntime refuses it, one clear line.
+    junk = tmp_path / "junk.onnx"
+    junk.write_bytes(b"not a model")
+    card = json.load(open(card_path(src)))
+    card["sha256"] = hashlib.sha256(b"not a model").hexdigest()
+    (tmp_path / "junk.json").write_text(json.dumps(card))
+    with pytest.raises(MocapInputError, match="not a usable ONNX model"):
+        OnnxLabeler(junk, layout)
+    # Another layout's model.
+    with pytest.raises(MocapInputError, match="for layout 'glove13'") as e:
+        OnnxLabeler(shipped_model("set", "glove13"), layout)
+    assert "set_glove13.onnx" in str(e.value)
+    # No card.
+    lone = tmp_path / "lone.onnx"
+    shutil.copy(src, lone)
+    with pytest.raises(MocapInputError, match="card lone.json is missing"):
+        OnnxLabeler(lone, layout)
+    # A perm model asked for as set.
+    with pytest.raises(MocapInputError, match="'perm' model, not 'set'"):
+        make_labeler("set", layout, model=shipped_model("perm", "han19"))
+
+
+@pytest.mark.parametrize("method", ONNX_METHODS)
+def test_onnxruntime_agrees_with_torch(method, tmp_path):
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch==2.13.0)")
+    pytest.importorskip("onnx", reason="onnx is not installed")
+    from training.inputs import get_method
+
+    torch.manual_seed(0)
+    layout = load_layout("glove13")
+    m = get_method(method, layout.names)
+    net = m.build().eval()
+    fr = sample_frames(layout, 96, np.random.default_rng(0))
+    path = str(tmp_path / f"{method}.onnx")
+    m.export(net, fr[:4], path)
+    import onnxruntime as ort
+
+    inputs, _ = m.feeds(fr)
+    with torch.no_grad():
+        expected = m.export_module(net)(*inputs).numpy()
+    got = ort.InferenceSession(path).run(None, {n: t.numpy() for n, t in zip(m.input_names, inputs)})[0]
+    assert got.shape == expected.shape
+    if method == "set":
+        expected, got = expected[fr.mask], got[fr.mask]  # padded rows are not outputs
+    np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-4)

@@ -1,0 +1,30 @@
+"""The recipes of the shipped models: ``python -m training --all`` (``make models``) rebuilds them all.
+
+Every model trains on synthetic frames only (the han2018 data is non-commercial: evaluation
+only), seeded, within 30 minutes on a 2-core CPU.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+from mocap_autolabel.core.synth.frames import FrameConfig
+
+from .train import Recipe
+
+#: Han 2018's augmentation: drop 0-5 markers, add 0-2 ghosts; no distractors (their method clusters hands first).
+HAN_PROTOCOL = asdict(FrameConfig(drop=(0, 5), ghosts=(0, 2), distractor_share=0.0))
+
+SHIPPED_LAYOUTS = ("han19", "glove13")
+
+
+def recipe(method: str, layout: str) -> Recipe:
+    """The recipe of the shipped ``method`` model for a built-in ``layout`` (or a user layout)."""
+    if method == "set":
+        # Ours: every corruption, distractors in half of the frames.
+        return Recipe(method="set", steps=10000 if layout == "han19" else 6000, lr=6e-3)
+    if method == "perm":
+        return Recipe(method="perm", steps=3000, lr=1e-3, frames=HAN_PROTOCOL)
+    if method == "cnn":
+        return Recipe(method="cnn", steps=2000, batch=128, lr=1e-3, frames=HAN_PROTOCOL)
+    raise ValueError(f"no recipe for method {method!r}")

@@ -1,0 +1,127 @@
+"""Training loop, ONNX export and model card, shared by the ``set``, ``perm`` and ``cnn`` models."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import torch
+from mocap_autolabel.core.atomic import atomic_output
+from mocap_autolabel.core.labelers.assign import assign
+from mocap_autolabel.core.layout import Layout
+from mocap_autolabel.core.metrics import score_labeling
+from mocap_autolabel.core.synth.frames import FrameConfig, LabeledFrames, sample_frames
+
+from .inputs import Method, get_method
+
+
+@dataclass
+class Recipe:
+    """Everything that determines a trained model (with the layout and the code)."""
+
+    method: str = "set"
+    steps: int = 6000
+    batch: int = 256
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    seed: int = 0
+    chunk: int = 8192  # frames generated at once (amortises building hands)
+    frames: dict = field(default_factory=lambda: asdict(FrameConfig()))
+    model: dict = field(default_factory=dict)
+    validation_frames: int = 4096
+
+
+def _progress(done: int, total: int, started: float, loss: float, stream=sys.stderr) -> None:
+    elapsed = time.perf_counter() - started
+    eta = elapsed / max(done, 1) * (total - done)
+    width = 30
+    filled = int(width * done / total)
+    stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} steps  loss {loss:.3f}  "
+                 f"{elapsed / 60:4.1f} min  ETA {eta / 60:4.1f} min ")
+    if done == total:
+        stream.write("\n")
+    stream.flush()
+
+
+def evaluate(method: Method, net: torch.nn.Module, layout: Layout, frames: LabeledFrames) -> dict:
+    """Per-frame accuracy of ``net`` on labeled frames, through the shared assignment step."""
+    net.eval()
+    scores = np.concatenate([method.scores(net, frames[s:s + 1024]) for s in range(0, len(frames), 1024)])
+    net.train()
+    labels, _ = assign(scores, frames.mask)
+    return score_labeling(labels, frames.labels, frames.mask, len(layout)).as_dict()
+
+
+def train(layout: Layout, recipe: Recipe, progress: Callable | None = _progress) -> tuple[torch.nn.Module, dict]:
+    """Train one model of ``recipe.method`` for ``layout`` on synthetic frames; returns it and its metrics."""
+    torch.manual_seed(recipe.seed)
+    rng = np.random.default_rng(recipe.seed)
+    method = get_method(recipe.method, layout.names, **recipe.model)
+    net = method.build()
+    opt = torch.optim.AdamW(net.parameters(), lr=recipe.lr, weight_decay=recipe.weight_decay)
+    warm = max(1, recipe.steps // 20)
+
+    def schedule(step: int) -> float:  # linear warm-up, cosine decay
+        return min(1.0, (step + 1) / warm) * 0.5 * (1 + math.cos(math.pi * min(step, recipe.steps) / recipe.steps))
+
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, schedule)
+    cfg = FrameConfig(**recipe.frames)
+    val = sample_frames(layout, recipe.validation_frames, np.random.default_rng(recipe.seed + 10_000), cfg)
+    started = time.perf_counter()
+    pool = sample_frames(layout, recipe.chunk, rng, cfg)
+    used = 0
+    ema = None
+    for step in range(recipe.steps):
+        if used + recipe.batch > recipe.chunk:
+            pool, used = sample_frames(layout, recipe.chunk, rng, cfg), 0
+        batch = pool[used:used + recipe.batch]
+        used += recipe.batch
+        k = max(1, int(batch.mask.sum(axis=1).max()))
+        batch = LabeledFrames(batch.points[:, :k], batch.labels[:, :k], batch.mask[:, :k], batch.markers)
+        loss = method.loss(net, batch)
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(net.parameters(), 1.0)
+        opt.step()
+        sched.step()
+        ema = loss.item() if ema is None else 0.98 * ema + 0.02 * loss.item()
+        if progress and (step % 10 == 0 or step == recipe.steps - 1):
+            progress(step + 1, recipe.steps, started, ema)
+    seconds = time.perf_counter() - started
+    metrics = {"synthetic_validation": evaluate(method, net, layout, val), "train_seconds": round(seconds, 1)}
+    net.eval()
+    return net, metrics
+
+
+def export(net: torch.nn.Module, layout: Layout, recipe: Recipe, metrics: dict, path: str) -> dict:
+    """Write ``path`` (ONNX) and ``path`` with ``.json`` (the card) atomically; returns the card."""
+    method = get_method(recipe.method, layout.names, **recipe.model)
+    example = sample_frames(layout, 4, np.random.default_rng(0), FrameConfig(**recipe.frames))
+    with atomic_output(path) as tmp:
+        method.export(net, example, tmp)
+    digest = hashlib.sha256(open(path, "rb").read()).hexdigest()
+    card = {
+        "format": "mocap_autolabel model card 1",
+        "method": recipe.method,
+        "layout": {"name": layout.name, "labels": layout.names},
+        "input": method.card["input"],
+        "output": {"name": "scores", "shape": ["frames", "K", "M + 1"],
+                   "meaning": "log-domain scores of each observation against the M labels and null (last column)"},
+        "training": {"recipe": asdict(recipe), "data": "synthetic frames only (mocap_autolabel.core.synth.frames)",
+                     "frames_seen": recipe.steps * recipe.batch, "torch": torch.__version__,
+                     "machine": f"{platform.machine()} {os.cpu_count()} cores"},
+        "metrics": metrics,
+        "sha256": digest,
+    }
+    with atomic_output(os.path.splitext(path)[0] + ".json") as tmp:
+        with open(tmp, "w") as f:
+            json.dump(card, f, indent=1)
+    return card
