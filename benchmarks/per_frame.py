@@ -136,14 +136,14 @@ def glove_groups(layout, fit_frames: int = 600) -> list[Case]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--every", type=int, default=2, help="use every n-th han2018 frame")
+    ap.add_argument("--every", type=int, default=8, help="use every n-th han2018 frame")
     ap.add_argument("--quick", action="store_true", help="fewer frames, for a smoke run")
     ap.add_argument("--methods", nargs="*", default=list(METHODS))
     args = ap.parse_args()
     if not Path(HAN2018).is_dir():
         print(f"no data at {HAN2018}; nothing to benchmark")
         return 0
-    every = 8 if args.quick else args.every
+    every = 32 if args.quick else args.every
     han19, glove13 = load_layout("han19"), load_layout("glove13")
     results = {}
     results["(a) han2018, Han protocol"] = evaluate(han19, han_groups(han19, every, HAN, 1), args.methods)
@@ -153,7 +153,7 @@ def main() -> int:
     for c in range(6):
         cfg = FrameConfig(drop=(c, c), ghosts=(0, 0), distractor_share=0.0)
         by_occ[c] = evaluate(han19, han_groups(han19, every * 2, cfg, 2 + c), args.methods)
-    takes, frames = (1, 1500) if args.quick else (3, 4000)
+    takes, frames = (1, 1500) if args.quick else (2, 2500)
     results["(c) synthetic han19, held out"] = evaluate(han19, synth_groups(han19, takes, frames), args.methods)
     results["(c) synthetic glove13, held out"] = evaluate(glove13, synth_groups(glove13, takes, frames), args.methods)
     results["(d) glove13 real recording"] = evaluate(glove13, glove_groups(glove13), args.methods)

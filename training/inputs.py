@@ -6,6 +6,8 @@ card the exported model carries, so training and labeling share one definition.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import torch
 from mocap_autolabel.core.labelers.inputs import prepare_inputs, scores_from_outputs
@@ -59,8 +61,11 @@ class Method:
                 axes[n][1] = "K"
         if self.name == "set":
             axes[output_name][1] = "K"
-        torch.onnx.export(self.export_module(net).eval(), inputs, path, dynamo=False, opset_version=17,
-                          input_names=self.input_names, output_names=[output_name], dynamic_axes=axes)
+        with warnings.catch_warnings():
+            # The tracer warns about shape-dependent Python values (K, M); they are dynamic axes or constants.
+            warnings.simplefilter("ignore")
+            torch.onnx.export(self.export_module(net).eval(), inputs, path, dynamo=False, opset_version=17,
+                              input_names=self.input_names, output_names=[output_name], dynamic_axes=axes)
 
 
 class SetMethod(Method):
@@ -74,7 +79,11 @@ class SetMethod(Method):
         return {"convention": "points",
                 "points": {"shape": ["frames", "K", 3], "dtype": "float32", "units": "m",
                            "meaning": "observations of each frame, any order, padded with anything"},
-                "mask": {"shape": ["frames", "K"], "dtype": "float32", "meaning": "1 real observation, 0 padding"}}
+                "mask": {"shape": ["frames", "K"], "dtype": "float32", "meaning": "1 real observation, 0 padding"},
+                "axes": {"shape": ["frames", 3, 3], "dtype": "float32",
+                         "meaning": "principal axes of each frame's observations (columns, largest variance "
+                                    "first), from core.labelers.inputs.principal_frame; only |coordinates| "
+                                    "on them are used, so their signs do not matter"}}
 
     def export_module(self, net: torch.nn.Module) -> torch.nn.Module:
         return ObservationScores(net)

@@ -24,7 +24,7 @@ def recipe(method: str, layout: str) -> Recipe:
         # Ours: every corruption, distractors in half of the frames.
         return Recipe(method="set", steps=10000 if layout == "han19" else 6000, lr=6e-3)
     if method == "perm":
-        return Recipe(method="perm", steps=3000, lr=1e-3, frames=HAN_PROTOCOL)
+        return Recipe(method="perm", steps=3000, lr=3e-3, frames=HAN_PROTOCOL)
     if method == "cnn":
         return Recipe(method="cnn", steps=2000, batch=128, lr=1e-3, frames=HAN_PROTOCOL)
     raise ValueError(f"no recipe for method {method!r}")

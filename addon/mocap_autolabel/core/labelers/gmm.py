@@ -82,6 +82,9 @@ class GmmLabeler(Labeler):
         tolerance: metres; the triangle found in a frame may differ this much (summed over
             its three sides) from the fitted one, else the frame has no hand frame and all its
             points score null.
+        candidates: triangles tried per frame (the best-matching shapes): dense layouts have
+            several triangles of about the right size, so the one whose hand frame gives the
+            other points the highest likelihood wins.
     """
 
     name = "gmm"

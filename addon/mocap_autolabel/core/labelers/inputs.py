@@ -54,7 +54,8 @@ def pca_slots(points: np.ndarray, mask: np.ndarray, slots: int) -> tuple[np.ndar
     """Ghorbani's canonical input: ``x`` float32 ``(B, slots, 3)`` and which observation fills each slot.
 
     The first principal axis becomes z and the second x; each axis is scaled to [0, 1] over the
-    frame's observations. Frames with more observations than slots keep those nearest the centre.
+    frame's observations; slots are filled in order of z, empty slots last. Frames with more
+    observations than slots keep those nearest the centre.
 
     Returns:
         x, and ``index`` int ``(B, slots)``: the observation (column of ``points``) in each slot, -1 if empty.
@@ -64,7 +65,11 @@ def pca_slots(points: np.ndarray, mask: np.ndarray, slots: int) -> tuple[np.ndar
     c = (points - centre) @ axes  # columns: first, second, third principal axis
     c = c[:, :, [1, 2, 0]]  # x = second, y = third, z = first
     radius = np.where(mask, np.linalg.norm(points - centre, axis=2), np.inf)
-    order = np.sort(np.argsort(radius, axis=1, kind="stable")[:, :slots], axis=1)  # keep the given (random) order
+    order = np.argsort(radius, axis=1, kind="stable")[:, :slots]
+    # Slots in order of the first principal coordinate: part of the canonical form (a random order
+    # would leave the MLP to learn permutation equivariance too, which 3,000 steps cannot teach).
+    first = np.take_along_axis(np.where(mask, c[..., 2], np.inf), order, axis=1)
+    order = np.take_along_axis(order, np.argsort(first, axis=1, kind="stable"), axis=1)
     index = np.where(np.take_along_axis(mask, order, axis=1), order, -1)
     if k < slots:
         index = np.concatenate([index, np.full((b, slots - k), -1)], axis=1)
@@ -155,18 +160,28 @@ def prepare_inputs(card: dict, points: np.ndarray, mask: np.ndarray) -> tuple[di
 
 
 def scores_from_outputs(card: dict, outputs: list, context: dict, points: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Turn a model's raw outputs into the protocol's ``(B, K, M + 1)`` scores."""
+    """Turn a model's raw outputs into the protocol's ``(B, K, M + 1)`` scores.
+
+    The card's ``calibration.null_offset`` (nats, chosen on held-out synthetic frames after
+    training) is subtracted from the null column.
+    """
     convention = card["input"].get("convention", "points")
     m = len(card["layout"]["labels"])
     if convention == "points":
-        return outputs[0]
-    if convention == "pca":
-        return slot_scores(outputs[0], context["index"], points.shape[1], m)
-    if convention == "depth":
+        scores = outputs[0]
+    elif convention == "pca":
+        scores = slot_scores(outputs[0], context["index"], points.shape[1], m)
+    elif convention == "depth":
         pred = outputs[0].reshape(len(points), m, 3)
         canon = ((points - context["centre"]) @ context["rot"]) / context["scale"][:, None, None]
-        return match_scores(pred, canon, context["scale"])
-    raise ValueError(f"unknown input convention {convention!r}")
+        scores = match_scores(pred, canon, context["scale"])
+    else:
+        raise ValueError(f"unknown input convention {convention!r}")
+    offset = float(card.get("calibration", {}).get("null_offset", 0.0))
+    if offset:
+        scores = scores.copy()
+        scores[..., m] -= offset
+    return scores
 
 
 def slot_scores(log_d: np.ndarray, index: np.ndarray, k: int, m: int) -> np.ndarray:
