@@ -10,7 +10,6 @@ import json
 import sys
 
 import numpy as np
-
 from mocap_autolabel.core.atomic import atomic_output
 from mocap_autolabel.core.labelers.onnx_labeler import OnnxLabeler, card_path
 from mocap_autolabel.core.layout import load_layout
