@@ -53,7 +53,7 @@ import importlib.abc, importlib.machinery, json, os, sys, sysconfig
 
 # Hide the venv's copies of the bundled packages: only the extension's wheels may provide them.
 VENV_PATHS = {os.path.realpath(sysconfig.get_paths()[k]) for k in ("purelib", "platlib")}
-BUNDLED = {"ezc3d", "c3d", "onnxruntime"}
+BUNDLED = {"ezc3d", "c3d", "onnxruntime", "scipy"}
 
 class HideVenvCopies(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path=None, target=None):
@@ -119,6 +119,16 @@ import importlib
 layouts = importlib.import_module(module + ".core.layout")  # the TOML files ship inside the zip
 out["layouts"] = layouts.builtin_layouts()
 out["han19_markers"] = len(layouts.load_layout("han19"))
+# Label a synthetic frame batch with the shipped set model through the extension's own copies
+# of onnxruntime and scipy (the models ship inside the zip).
+labelers = importlib.import_module(module + ".core.labelers")
+frames = importlib.import_module(module + ".core.synth.frames")
+han19 = layouts.load_layout("han19")
+fr = frames.sample_frames(han19, 64, np.random.default_rng(0), frames.FrameConfig(drop=(0, 1), ghosts=(0, 0),
+                                                                                   distractor_share=0.0))
+labels, conf = labelers.make_labeler("set", han19).label_points(fr.points, fr.mask)
+out["set_accuracy"] = float((labels[fr.mask] == fr.labels[fr.mask]).mean())
+out["scipy_file"] = sys.modules["scipy"].__file__
 print("RESULT " + json.dumps(out), flush=True)
 """
 
@@ -187,7 +197,7 @@ def test_zip_validates_and_holds_only_this_platform(extension_zip: Path) -> None
     assert sorted(Path(w).name for w in manifest["build"]["generated"]["wheels"]) == wheels
     distributions = {w.split("-")[0].lower() for w in wheels}
     assert {"ezc3d", "c3d", "onnxruntime"} <= distributions
-    assert "numpy" not in distributions and "scipy" not in distributions
+    assert "numpy" not in distributions and "scipy" in distributions  # Blender has numpy, not scipy
 
 
 def test_install_enable_and_import_c3d(extension_zip: Path, tmp_path: Path) -> None:
@@ -222,5 +232,7 @@ def test_install_enable_and_import_c3d(extension_zip: Path, tmp_path: Path) -> N
     assert found["animated"] == ["A", "B", "C"]
     assert {"han19", "glove13", "tips3", "tips5", "tips10"} <= set(found["layouts"])
     assert found["han19_markers"] == 19
+    assert found["set_accuracy"] > 0.8
+    assert Path(found["scipy_file"]).resolve().is_relative_to(user_resources.resolve())
     for name, (start, end) in found["frame_ranges"].items():
         assert end - start >= 9 - 1e-6, (name, start, end)

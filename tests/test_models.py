@@ -37,7 +37,8 @@ def test_shipped_models_label_synthetic_frames(method):
     fr = sample_frames(layout, 400, np.random.default_rng(123), cfg)
     labels, conf = make_labeler(method, layout).label_points(fr.points, fr.mask)
     s = score_labeling(labels, fr.labels, fr.mask, len(layout))
-    assert s.accuracy > 0.6  # far above chance (1/20); the benchmark reports the real figures
+    # Far above chance (1/20); the benchmark reports the real figures.
+    assert s.accuracy > {"set": 0.8, "cnn": 0.4, "perm": 0.25}[method]
     assert ((conf >= 0) & (conf <= 1)).all()
 
 

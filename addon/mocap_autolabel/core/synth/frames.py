@@ -110,7 +110,7 @@ def corrupt_markers(markers: np.ndarray, rng: np.random.Generator, cfg: FrameCon
     local = np.asarray(markers, dtype=np.float64)
 
     # Occlusion: drop a random number of markers.
-    n_drop = rng.integers(cfg.drop[0], cfg.drop[1] + 1, size=n)
+    n_drop = np.minimum(rng.integers(cfg.drop[0], cfg.drop[1] + 1, size=n), m - 1)  # keep one marker at least
     rank = np.argsort(rng.random((n, m)), axis=1).argsort(axis=1)
     marker_ok = rank >= n_drop[:, None]
 
