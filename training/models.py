@@ -50,7 +50,8 @@ class SetLabeler(nn.Module):
     to the centroid (its features), and radial-basis-encoded pairwise distances (attention biases).
     Scores against the labels and the two dustbins go through a log-domain Sinkhorn.
 
-    Input: ``points`` float32 ``(B, K, 3)`` metres, ``mask`` float32 ``(B, K)``.
+    Input: ``points`` float32 ``(B, K, 3)`` metres, ``mask`` float32 ``(B, K)``, ``axes`` float32
+    ``(B, 3, 3)`` principal axes of the frame (only |coordinates| on them are used).
     Output: ``(B, K + 1, M + 1)`` log-probabilities (see :func:`log_sinkhorn_dustbin`).
     """
 
