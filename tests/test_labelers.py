@@ -13,7 +13,8 @@ from mocap_autolabel.core.labelers.inputs import depth_image, pca_slots
 from mocap_autolabel.core.labelers.nearest import NearestLabeler, digit_chains
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import data_set_stats, score_labeling
-from mocap_autolabel.core.synth.frames import FrameConfig, random_rotations, sample_frames
+from mocap_autolabel.core.rotations import random_rotations
+from mocap_autolabel.core.synth.frames import FrameConfig, sample_frames
 from mocap_autolabel.core.synth.generate import clean_config, synthesize
 from mocap_autolabel.core.temporal.murty import murty, nbest_labelings
 

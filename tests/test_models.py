@@ -13,7 +13,8 @@ from mocap_autolabel.core.labelers import ONNX_METHODS, assign, make_labeler
 from mocap_autolabel.core.labelers.onnx_labeler import OnnxLabeler, card_path, shipped_model
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import score_labeling
-from mocap_autolabel.core.synth.frames import FrameConfig, random_rotations, sample_frames
+from mocap_autolabel.core.rotations import random_rotations
+from mocap_autolabel.core.synth.frames import FrameConfig, sample_frames
 
 SHIPPED = [(m, layout) for layout in ("han19", "glove13") for m in ONNX_METHODS]
 

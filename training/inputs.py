@@ -25,6 +25,8 @@ class Method:
 
     name = ""
     input_names: list[str] = []
+    #: Inputs and outputs whose second axis is the frame's observations (any K).
+    per_observation: tuple[str, ...] = ()
 
     def __init__(self, n_labels: int, labels: list[str], **model):
         self.m, self.model_kw = n_labels, model
@@ -55,12 +57,8 @@ class Method:
 
     def export(self, net: torch.nn.Module, frames: LabeledFrames, path: str, output_name: str = "scores") -> None:
         inputs, _ = self.feeds(frames)
-        axes = {n: {0: "frames"} for n in self.input_names + [output_name]}
-        for n in self.input_names:
-            if inputs[self.input_names.index(n)].dim() == 2 or n == "points":
-                axes[n][1] = "K"
-        if self.name == "set":
-            axes[output_name][1] = "K"
+        axes = {n: {0: "frames", 1: "K"} if n in self.per_observation else {0: "frames"}
+                for n in self.input_names + [output_name]}
         with warnings.catch_warnings():
             # The tracer warns about shape-dependent Python values (K, M); they are dynamic axes or constants.
             warnings.simplefilter("ignore")
@@ -71,6 +69,7 @@ class Method:
 class SetMethod(Method):
     name = "set"
     input_names = ["points", "mask", "axes"]
+    per_observation = ("points", "mask", "scores")
 
     def build(self) -> torch.nn.Module:
         return SetLabeler(self.m, **self.model_kw)

@@ -73,6 +73,24 @@ def calibrate_null(scores: np.ndarray, frames: LabeledFrames, n_labels: int) -> 
     return best[1], best[2]
 
 
+def validation_frames(layout: Layout, recipe: Recipe) -> LabeledFrames:
+    """The held-out synthetic frames a recipe is validated and calibrated on (seed + 10000)."""
+    return sample_frames(layout, recipe.validation_frames, np.random.default_rng(recipe.seed + 10_000),
+                         FrameConfig(**recipe.frames))
+
+
+def calibration(offset: float) -> dict:
+    """The card's ``calibration`` entry."""
+    return {"null_offset": offset, "chosen_on": "synthetic validation frames (seed + 10000), best accuracy"}
+
+
+def write_card(model_path: str, card: dict) -> None:
+    """Write the card beside ``model_path`` atomically."""
+    with atomic_output(os.path.splitext(model_path)[0] + ".json") as tmp:
+        with open(tmp, "w") as f:
+            json.dump(card, f, indent=1)
+
+
 def evaluate(method: Method, net: torch.nn.Module, layout: Layout, frames: LabeledFrames) -> tuple[float, dict]:
     """Null offset and per-frame accuracy of ``net`` on labeled frames, through the shared assignment step."""
     net.eval()
@@ -95,7 +113,7 @@ def train(layout: Layout, recipe: Recipe, progress: Callable | None = _progress)
 
     sched = torch.optim.lr_scheduler.LambdaLR(opt, schedule)
     cfg = FrameConfig(**recipe.frames)
-    val = sample_frames(layout, recipe.validation_frames, np.random.default_rng(recipe.seed + 10_000), cfg)
+    val = validation_frames(layout, recipe)
     started = time.perf_counter()
     pool = sample_frames(layout, recipe.chunk, rng, cfg)
     used = 0
@@ -140,12 +158,9 @@ def export(net: torch.nn.Module, layout: Layout, recipe: Recipe, metrics: dict, 
         "training": {"recipe": asdict(recipe), "data": "synthetic frames only (mocap_autolabel.core.synth.frames)",
                      "frames_seen": recipe.steps * recipe.batch, "torch": torch.__version__,
                      "machine": f"{platform.machine()} {os.cpu_count()} cores"},
-        "calibration": {"null_offset": metrics.get("null_offset", 0.0),
-                        "chosen_on": "synthetic validation frames (seed + 10000), best accuracy"},
+        "calibration": calibration(metrics.get("null_offset", 0.0)),
         "metrics": metrics,
         "sha256": digest,
     }
-    with atomic_output(os.path.splitext(path)[0] + ".json") as tmp:
-        with open(tmp, "w") as f:
-            json.dump(card, f, indent=1)
+    write_card(path, card)
     return card

@@ -74,3 +74,14 @@ def continuous_quaternions(q: np.ndarray, axis: int = 0) -> np.ndarray:
     flips = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
     qt[1:] *= flips[..., None]
     return q
+
+
+def random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
+    """``(n, 3, 3)`` rotations drawn uniformly (normalised Gaussian quaternions)."""
+    q = rng.standard_normal((n, 4))
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)

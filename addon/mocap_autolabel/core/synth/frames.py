@@ -14,6 +14,7 @@ import numpy as np
 from ..hand.skeleton import N_DOF, HandModel, sample_hand_size
 from ..hand.skin import blend
 from ..layout import Layout
+from ..rotations import random_rotations
 from .generate import EMPTY, GHOST, _slip
 from .poses import sample_joint_angles
 
@@ -53,17 +54,6 @@ class LabeledFrames:
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
-
-
-def random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
-    """``(n, 3, 3)`` rotations drawn uniformly (normalised Gaussian quaternions)."""
-    q = rng.standard_normal((n, 4))
-    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], axis=1)
 
 
 def hand_frames(layout: Layout, n: int, rng: np.random.Generator, cfg: FrameConfig) -> np.ndarray:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..hand.skeleton import N_DOF
-from ..rotations import matrix_to_rotvec, rotvec_to_matrix
+from ..rotations import matrix_to_rotvec, random_rotations, rotvec_to_matrix
 from .poses import sample_joint_angles
 
 
@@ -41,13 +41,7 @@ def min_jerk(tau: np.ndarray) -> np.ndarray:
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """A rotation matrix drawn uniformly (a normalised Gaussian quaternion)."""
-    q = rng.standard_normal(4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return random_rotations(rng, 1)[0]
 
 
 def _turn(rng: np.random.Generator, rot: np.ndarray, cfg: MotionConfig, tries: int = 20) -> np.ndarray:
