@@ -1,0 +1,173 @@
+"""The Labeling: one decision (a label or null, with a confidence) per tracklet segment.
+
+A *segment* is a run of frames of one point slot: a tracklet, or a piece of one when the
+tracklet was split (a swap inside it, or the edge of a user's constraint). Everything the
+pipeline decides, and everything a reviewer changes, is said in segments.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .take import Take
+
+NULL = -1  #: the label of a ghost / unassigned segment
+EMPTY = -2  #: per-sample value where a slot has no sample
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """A user's decision: slot ``slot`` in frames ``[start, stop)`` is ``label`` (``NULL`` = ghost).
+
+    Frames are 0-based indices into ``Take.positions``. Constraints name slots and frames, not
+    segment ids, so they stay meaningful when the segmentation changes.
+    """
+
+    slot: int
+    start: int
+    stop: int
+    label: int
+
+    def __post_init__(self) -> None:
+        if self.stop <= self.start:
+            raise ValueError(f"constraint on slot {self.slot}: empty frame range [{self.start}, {self.stop})")
+
+
+@dataclass
+class Labeling:
+    """Decisions for every segment of a take, as parallel arrays ordered by (slot, start).
+
+    Attributes:
+        names: the layout's label names (``M``).
+        n_frames, n_points: the take's shape.
+        slot, start, stop: int64 ``(n,)``: each segment's slot and frame range ``[start, stop)``.
+        label: int16 ``(n,)``: label index, or :data:`NULL`.
+        confidence: float32 ``(n,)`` in [0, 1]: the chance that the decision is right (calibrated
+            where a calibration exists for the method; see ``core/temporal/confidence.py``).
+        locked: bool ``(n,)``: decided by a user constraint.
+        info: how it was made (method, temporal mode, timings...), for reports.
+    """
+
+    names: list[str]
+    n_frames: int
+    n_points: int
+    slot: np.ndarray
+    start: np.ndarray
+    stop: np.ndarray
+    label: np.ndarray
+    confidence: np.ndarray
+    locked: np.ndarray
+    info: dict
+
+    def __len__(self) -> int:
+        return int(self.slot.shape[0])
+
+    @property
+    def length(self) -> np.ndarray:
+        return self.stop - self.start
+
+    def _paint(self, values: np.ndarray, fill, dtype) -> np.ndarray:
+        out = np.full((self.n_frames, self.n_points), fill, dtype=dtype)
+        lengths = self.length
+        seg = np.repeat(np.arange(len(self)), lengths)
+        offset = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+        out[self.start[seg] + offset, self.slot[seg]] = values[seg]
+        return out
+
+    def per_sample(self) -> np.ndarray:
+        """int16 ``(frames, points)``: the label of every sample, :data:`NULL`, or :data:`EMPTY` where
+        the slot has no sample."""
+        return self._paint(self.label, EMPTY, np.int16)
+
+    def per_sample_confidence(self) -> np.ndarray:
+        """float32 ``(frames, points)``: the confidence of every sample's segment, NaN where none."""
+        return self._paint(self.confidence, np.nan, np.float32)
+
+    def segment_ids(self) -> np.ndarray:
+        """int32 ``(frames, points)``: the segment of every sample, -1 where none."""
+        return self._paint(np.arange(len(self)), -1, np.int32)
+
+    def summary(self, confident: float = 0.95) -> dict:
+        """Counts for reports: segments, labeled samples, the share of labeled samples at or above
+        ``confident``, and the uncertain labeled segments (worst first) with their frame ranges."""
+        named = self.label >= 0
+        samples = self.length
+        sure = named & (self.confidence >= confident)
+        order = np.argsort(self.confidence)
+        uncertain = [{"slot": int(self.slot[i]), "start": int(self.start[i]), "stop": int(self.stop[i]),
+                      "label": self.names[self.label[i]] if self.label[i] >= 0 else None,
+                      "confidence": round(float(self.confidence[i]), 4)}
+                     for i in order if self.confidence[i] < confident and self.length[i] > 0]
+        return {
+            "segments": len(self),
+            "labeled_segments": int(named.sum()),
+            "null_segments": int((~named).sum()),
+            "labeled_samples": int(samples[named].sum()),
+            "null_samples": int(samples[~named].sum()),
+            "confident_share": float(samples[sure].sum() / max(samples[named].sum(), 1)),
+            "uncertain_segments": uncertain,
+        }
+
+
+def labeled_take(take: Take, labeling: Labeling) -> Take:
+    """The labeled take: the layout's M points by name (NaN where missing), then one ``*N`` point
+    per input slot holding that slot's unassigned samples (slots with none are left out).
+
+    Every input sample ends in exactly one output point (the test suite checks it on real files).
+    """
+    per = labeling.per_sample()
+    m = len(labeling.names)
+    valid = take.valid
+    named = valid & (per >= 0)
+    rest = valid & ~named
+    out_named = np.full((take.n_frames, m, 3), np.nan, dtype=np.float32)
+    f, p = np.nonzero(named)
+    lab = per[f, p].astype(np.int64)
+    if len(np.unique(f * m + lab)) != len(f):
+        raise ValueError("labeling gives one label to two samples of the same frame")
+    out_named[f, lab] = take.positions[f, p]
+    keep = np.flatnonzero(rest.any(axis=0))
+    out_rest = np.where(rest[:, keep, None], take.positions[:, keep], np.nan).astype(np.float32)
+    residuals = None
+    if take.residuals is not None:
+        res_named = np.full((take.n_frames, m), np.nan, dtype=np.float32)
+        res_named[f, lab] = take.residuals[f, p]
+        res_rest = np.where(rest[:, keep], take.residuals[:, keep], np.nan).astype(np.float32)
+        residuals = np.concatenate([res_named, res_rest], axis=1)
+    return Take(positions=np.concatenate([out_named, out_rest], axis=1),
+                names=list(labeling.names) + [f"*{i}" for i in range(len(keep))], rate=take.rate,
+                first_frame=take.first_frame, source_units=take.source_units, residuals=residuals,
+                source=take.source, vendor=take.vendor)
+
+
+def segments_from_runs(names: list[str], labels: np.ndarray, confidence: np.ndarray, valid: np.ndarray,
+                       info: dict, split: np.ndarray | None = None) -> Labeling:
+    """A Labeling from per-sample labels ``(F, P)``: one segment per run of one label in one slot.
+
+    Args:
+        labels: int ``(F, P)`` label per sample (ignored where not ``valid``).
+        confidence: float ``(F, P)``; a segment gets the mean of its samples.
+        valid: bool ``(F, P)``.
+        split: optional bool ``(F, P)``: also start a new segment where True (a tracklet start).
+    """
+    frames, points = valid.shape
+    lab = np.where(valid, labels, EMPTY).astype(np.int64)
+    change = np.ones_like(valid)
+    change[1:] = lab[1:] != lab[:-1]
+    if split is not None:
+        change |= split
+    begin = valid & change
+    # Row-major order over (slot, frame) gives segments ordered by (slot, start).
+    slot, start = np.nonzero(begin.T)
+    seg = np.cumsum(begin.T.ravel()) - 1
+    inside = valid.T.ravel()
+    seg_of = seg[inside]
+    n = len(slot)
+    length = np.bincount(seg_of, minlength=n)
+    conf = np.bincount(seg_of, weights=confidence.T.ravel()[inside], minlength=n) / np.maximum(length, 1)
+    return Labeling(names=list(names), n_frames=frames, n_points=points, slot=slot.astype(np.int64),
+                    start=start.astype(np.int64), stop=(start + length).astype(np.int64),
+                    label=lab.T[slot, start].astype(np.int16), confidence=conf.astype(np.float32),
+                    locked=np.zeros(n, dtype=bool), info=info)

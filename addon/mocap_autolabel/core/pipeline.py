@@ -1,0 +1,224 @@
+"""``label_take``: the one entry point from a raw take to a Labeling (CLI, batch and Blender use it).
+
+Take -> tracklets -> per-frame scores (any labeler) -> user constraints -> temporal decision
+(trajectory voting, N-best Viterbi, or none) -> calibrated confidence per segment.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from .errors import MocapInputError
+from .labelers import METHODS, FrameBatch, make_labeler, pack_frames
+from .labelers.assign import assign, row_probabilities
+from .labeling import EMPTY, NULL, Constraint, Labeling, segments_from_runs
+from .layout import Layout
+from .take import Take
+from .temporal.confidence import load_calibration
+from .temporal.voting import (
+    LOG_FLOOR,
+    Samples,
+    Segments,
+    check_constraints,
+    exclusive_assignment,
+    find_swaps,
+    segment_of,
+    segment_weights,
+    split_segments,
+)
+from .tracklets import find_tracklets
+
+#: Temporal modes: ``vote`` (trajectory voting with exclusivity, the default), ``viterbi``
+#: (Alexanderson's N-best + Kalman), ``none`` (per-frame labels as they come).
+TEMPORAL = ("vote", "viterbi", "none")
+
+#: Observations scored per frame at most: beyond this, the points nearest the frame's median
+#: (the hand) are kept, so a take with thousands of ghosts per frame costs bounded time.
+MAX_POINTS_PER_LABEL = 3
+
+
+def _cap(layout: Layout) -> int:
+    return max(MAX_POINTS_PER_LABEL * len(layout), len(layout) + 24)
+
+
+def _pack(take: Take, cap: int, chunk: int = 4096) -> FrameBatch:
+    """All frames packed to at most ``cap`` observations, in chunks (bounded memory for huge takes)."""
+    parts = [pack_frames(take.positions[s:s + chunk], cap) for s in range(0, take.n_frames, chunk)]
+    k = max(b.points.shape[1] for b in parts)
+
+    def widen(arrays: list[np.ndarray], fill) -> np.ndarray:
+        out = np.full((take.n_frames, k) + arrays[0].shape[2:], fill, dtype=arrays[0].dtype)
+        row = 0
+        for a in arrays:
+            out[row:row + len(a), :a.shape[1]] = a
+            row += len(a)
+        return out
+
+    return FrameBatch(widen([b.points for b in parts], 0.0), widen([b.mask for b in parts], False),
+                      widen([b.slots for b in parts], -1))
+
+
+def _labeler(method: str, layout: Layout, model, fit: np.ndarray | None, start: np.ndarray | None, take: Take,
+             batch):
+    if method == "gmm":
+        if fit is None:
+            raise MocapInputError(take.source, "the gmm method needs a labeled take of the subject to fit on")
+        lab = make_labeler("gmm", layout)
+        lab.fit(fit)
+        return lab
+    if method == "nearest":
+        if start is None:  # seed the tracker with our own labels of the first frame that has points
+            first = int(np.argmax(batch.mask.any(axis=1)))
+            seed = make_labeler("set", layout)
+            labels, _ = assign(seed.scores(batch.points[first:first + 1], batch.mask[first:first + 1]),
+                               batch.mask[first:first + 1])
+            start = np.full((len(layout), 3), np.nan)
+            ok = labels[0] >= 0
+            start[labels[0][ok]] = batch.points[first][ok]
+            # The tracker starts at frame 0; earlier empty frames carry no information.
+        return make_labeler("nearest", layout, start=start)
+    return make_labeler(method, layout, model)
+
+
+def _apply_constraints(scores: np.ndarray, slots: np.ndarray, mask: np.ndarray,
+                       constraints: Sequence[Constraint]) -> np.ndarray:
+    """Scores with every constraint made certain: the locked sample gets its label, and no other
+    observation of those frames can take that label."""
+    if not constraints:
+        return scores
+    scores = scores.copy()
+    m = scores.shape[2] - 1
+    for c in constraints:
+        frames = slice(c.start, c.stop)
+        col = m if c.label == NULL else c.label
+        hit = (slots[frames] == c.slot) & mask[frames]
+        block = scores[frames]
+        if c.label != NULL:
+            block[~hit, col] = LOG_FLOOR * 10  # the label is taken in these frames
+        rows = block[hit]
+        rows[:] = LOG_FLOOR * 10
+        rows[:, col] = 0.0
+        block[hit] = rows
+    return scores
+
+
+def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = "vote",
+               constraints: Sequence[Constraint] = (), model: str | None = None, fit: np.ndarray | None = None,
+               start: np.ndarray | None = None, score: str = "likelihood", p: float = 2.0, q: float = -0.5,
+               n_best: int = 5, split_swaps: bool = True, progress: Callable[[str], None] | None = None) -> Labeling:
+    """Label every sample of ``take`` with ``layout``'s labels or null.
+
+    Args:
+        take: the raw take (metres).
+        layout: the marker layout.
+        method: per-frame labeler, one of ``METHODS`` (``set``, ``perm``, ``cnn``, ``gmm``, ``nearest``).
+        temporal: one of :data:`TEMPORAL`.
+        constraints: the user's locked decisions; honoured exactly.
+        model: ONNX model for ``set`` / ``perm`` / ``cnn`` (default: the shipped one).
+        fit: ``(F, M, 3)`` labeled positions of the subject (``gmm`` needs them).
+        start: ``(M, 3)`` labeled first frame for ``nearest`` (default: ``set``'s labels of it).
+        score: voting score, ``"likelihood"`` (ours) or ``"power"`` (Ghorbani's, with ``p``, ``q``).
+        n_best: hypotheses per frame for ``viterbi``.
+        split_swaps: split a tracklet where its evidence flips for good (``vote`` only).
+        progress: called with a short message at each stage.
+
+    Returns:
+        the :class:`Labeling`; ``info`` holds the settings and the time of each stage.
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown labeling method {method!r}; choose one of {', '.join(METHODS)}")
+    if temporal not in TEMPORAL:
+        raise ValueError(f"unknown temporal mode {temporal!r}; choose one of {', '.join(TEMPORAL)}")
+    valid = take.valid
+    if take.n_frames == 0 or take.n_points == 0 or not valid.any():
+        raise MocapInputError(take.source, "the take has no marker samples to label")
+    constraints = list(constraints)
+    for c in constraints:
+        if not (0 <= c.slot < take.n_points and 0 <= c.start < c.stop <= take.n_frames):
+            raise ValueError(f"constraint {c} lies outside the take ({take.n_frames} frames, {take.n_points} slots)")
+    check_constraints(constraints, len(layout))
+    say = progress or (lambda _msg: None)
+    times: dict[str, float] = {}
+    t0 = time.perf_counter()
+
+    say("packing frames")
+    batch = _pack(take, _cap(layout))
+    points, mask, slots = batch.points, batch.mask, batch.slots
+    times["pack"] = time.perf_counter() - t0
+
+    say(f"scoring {take.n_frames} frames with {method}")
+    t = time.perf_counter()
+    labeler = _labeler(method, layout, model, fit, start, take, batch)
+    scores = labeler.scores(points, mask)
+    scores = _apply_constraints(scores, slots, mask, constraints)
+    times["scores"] = time.perf_counter() - t
+
+    say(f"temporal step: {temporal}")
+    t = time.perf_counter()
+    f_idx, k_idx = np.nonzero(mask)
+    logp = np.log(np.maximum(row_probabilities(scores[f_idx, k_idx]), np.exp(LOG_FLOOR))).astype(np.float32)
+    frame_labels, frame_conf = assign(scores, mask)
+    samples = Samples(frame=f_idx.astype(np.int64), slot=slots[f_idx, k_idx].astype(np.int64), logp=logp,
+                      label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
+    tracklets = find_tracklets(take)
+    cuts: dict[int, list[int]] = {}
+    for c in constraints:
+        cuts.setdefault(c.slot, []).extend([c.start, c.stop])
+    segments = split_segments(Segments(tracklets.slot.astype(np.int64), tracklets.start, tracklets.stop), cuts)
+    locked_at = np.full(valid.shape, EMPTY, dtype=np.int16)  # the locked label of each sample
+    for c in constraints:
+        locked_at[c.start:c.stop, c.slot] = np.where(valid[c.start:c.stop, c.slot], c.label, EMPTY)
+
+    info = {"method": method, "temporal": temporal, "layout": layout.name, "frames": take.n_frames,
+            "slots": take.n_points, "constraints": len(constraints)}
+    if temporal == "vote":
+        seg = segment_of(segments, samples.frame, samples.slot)
+        swaps = find_swaps(samples, seg, segments) if split_swaps else {}
+        if swaps:
+            segments = split_segments(segments, swaps)
+            seg = segment_of(segments, samples.frame, samples.slot)
+        info["swaps_split"] = int(sum(len(v) for v in swaps.values()))
+        weights, count = segment_weights(samples, seg, len(segments), score, p, q)
+        first_locked = locked_at[segments.start, segments.slot]
+        locked = {int(s): int(first_locked[s]) for s in np.flatnonzero(first_locked != EMPTY)}
+        label = exclusive_assignment(weights, segments, locked)
+        label[(count == 0) & (first_locked == EMPTY)] = NULL  # never scored (beyond the cap): no evidence
+        prob = np.exp(samples.logp.astype(np.float64))
+        m = len(layout)
+        col = np.where(label == NULL, m, label)
+        ok = seg >= 0
+        chosen = np.bincount(seg[ok], weights=prob[np.flatnonzero(ok), col[seg[ok]]], minlength=len(segments))
+        raw = (chosen / np.maximum(count, 1)).astype(np.float32)
+        labeling = Labeling(names=layout.names, n_frames=take.n_frames, n_points=take.n_points,
+                            slot=segments.slot, start=segments.start, stop=segments.stop,
+                            label=label.astype(np.int16), confidence=raw,
+                            locked=first_locked != EMPTY, info=info)
+    else:
+        if temporal == "viterbi":
+            from .temporal.viterbi import viterbi_labels
+
+            frame_labels = viterbi_labels(scores, mask, points, take.rate, n_best=n_best)
+            prob = row_probabilities(scores)
+            col = np.where(frame_labels == NULL, scores.shape[2] - 1, frame_labels)
+            frame_conf = np.take_along_axis(prob, col[..., None].astype(np.int64), axis=2)[..., 0]
+        per = np.full(valid.shape, NULL, dtype=np.int16)
+        conf = np.zeros(valid.shape, dtype=np.float32)
+        per[f_idx, slots[f_idx, k_idx]] = frame_labels[f_idx, k_idx]
+        conf[f_idx, slots[f_idx, k_idx]] = frame_conf[f_idx, k_idx]
+        split = np.zeros(valid.shape, dtype=bool)
+        split[segments.start, segments.slot] = True
+        labeling = segments_from_runs(layout.names, per, conf, valid, info, split=split)
+        labeling.locked = locked_at[labeling.start, labeling.slot] != EMPTY
+    times["temporal"] = time.perf_counter() - t
+
+    calibration = load_calibration(method, temporal, layout.name)
+    if calibration is not None:
+        labeling.confidence = calibration(labeling.confidence, labeling.length)
+    labeling.confidence[labeling.locked] = 1.0
+    info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
+    times["total"] = time.perf_counter() - t0
+    info["seconds"] = {key: round(v, 4) for key, v in times.items()}
+    return labeling

@@ -1,0 +1,261 @@
+"""Trajectory voting: one label per tracklet segment from per-frame scores, exclusive in time.
+
+Per-frame scores of any labeler are pooled over the samples of each segment, then one
+assignment over all segments decides: two segments that overlap in time never take the same
+label. That assignment is a small integer programme (HiGHS through ``scipy.optimize.milp``):
+for every label, the segments that could take it and are alive at one instant form a clique,
+and each clique holds the label at most once (the maximal cliques of intervals are found at
+their start frames).
+
+Two scores are available:
+- ``"likelihood"`` (ours): the sum over the segment's frames of log p(label | frame),
+  the maximum-likelihood segment label if frames are independent;
+- ``"power"`` (Ghorbani 2019): S = |T|^q (sum over frames given that label of c^p)^(1/p), the
+  published trajectory vote, weighted by |T| so that segments of different length compare.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.sparse import csr_matrix
+
+from ..labeling import NULL, Constraint
+
+#: log-probabilities below this are treated as this (one wrong frame must not veto a segment).
+LOG_FLOOR = -12.0
+
+
+@dataclass
+class Samples:
+    """Every scored sample of a take, flattened: the unit of the temporal step.
+
+    Attributes:
+        frame, slot: int64 ``(n,)``.
+        logp: float32 ``(n, M + 1)``: per-frame log-probabilities over the labels and null
+            (row-normalised), floored at :data:`LOG_FLOOR`.
+        label, confidence: the per-frame decision (shared assignment step) and its confidence.
+    """
+
+    frame: np.ndarray
+    slot: np.ndarray
+    logp: np.ndarray
+    label: np.ndarray
+    confidence: np.ndarray
+
+
+@dataclass
+class Segments:
+    """Segments (tracklets or pieces of them), ordered by (slot, start); ``[start, stop)`` frames."""
+
+    slot: np.ndarray
+    start: np.ndarray
+    stop: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.slot.shape[0])
+
+
+def split_segments(segments: Segments, cuts: dict[int, list[int]]) -> Segments:
+    """Split segments at frames: ``cuts`` maps a slot to frames where a new segment must begin."""
+    if not cuts:
+        return segments
+    slot, start, stop = [], [], []
+    for s, a, b in zip(segments.slot.tolist(), segments.start.tolist(), segments.stop.tolist()):
+        edges = sorted({a, b, *(c for c in cuts.get(s, ()) if a < c < b)})
+        slot += [s] * (len(edges) - 1)
+        start += edges[:-1]
+        stop += edges[1:]
+    return Segments(np.array(slot, dtype=np.int64), np.array(start, dtype=np.int64), np.array(stop, dtype=np.int64))
+
+
+def segment_of(segments: Segments, frame: np.ndarray, slot: np.ndarray) -> np.ndarray:
+    """The segment of each sample ``(frame, slot)``, -1 if it lies in none."""
+    key_start = segments.slot * (1 << 32) + segments.start
+    key = slot.astype(np.int64) * (1 << 32) + frame
+    i = np.searchsorted(key_start, key, side="right") - 1
+    ok = (i >= 0)
+    i = np.maximum(i, 0)
+    ok &= (segments.slot[i] == slot) & (frame < segments.stop[i])
+    return np.where(ok, i, -1)
+
+
+def find_swaps(samples: Samples, seg: np.ndarray, segments: Segments, min_run: int = 6,
+               penalty: float = 25.0) -> dict[int, list[int]]:
+    """Frames where a segment's evidence flips from one label to another for good (a swap by the
+    capture system without a gap). Binary segmentation: the best single change point of the
+    summed log-probabilities, kept if it gains more than ``penalty`` nats, then each side again.
+
+    Returns ``{slot: [frames where a new segment begins]}``.
+    """
+    cuts: dict[int, list[int]] = {}
+    order = np.lexsort((samples.frame, seg))
+    seg_sorted = seg[order]
+    bounds = np.searchsorted(seg_sorted, np.arange(len(segments) + 1))
+    best = np.argmax(samples.logp, axis=1)
+    for s in range(len(segments)):
+        lo, hi = bounds[s], bounds[s + 1]
+        if hi - lo < 2 * min_run:
+            continue
+        rows = order[lo:hi]
+        votes = np.bincount(best[rows], minlength=samples.logp.shape[1])
+        if (votes >= min_run).sum() < 2:  # no second label with a sustained run: nothing to split
+            continue
+        for frame in _change_points(samples.logp[rows], samples.frame[rows], min_run, penalty):
+            cuts.setdefault(int(segments.slot[s]), []).append(int(frame))
+    return cuts
+
+
+def _change_points(logp: np.ndarray, frames: np.ndarray, min_run: int, penalty: float) -> list[int]:
+    n = len(logp)
+    if n < 2 * min_run:
+        return []
+    csum = np.concatenate([np.zeros((1, logp.shape[1])), np.cumsum(logp, axis=0)])
+    whole = csum[-1].max()
+    cut = np.arange(min_run, n - min_run + 1)
+    before = csum[cut]  # (C, L)
+    after = csum[-1][None] - before
+    # Best pair of different labels on the two sides: top two of each side suffice.
+    b2 = np.argsort(before, axis=1)[:, -2:]
+    a2 = np.argsort(after, axis=1)[:, -2:]
+    rows = np.arange(len(cut))
+    gain = np.full(len(cut), -np.inf)
+    for i in range(2):
+        for j in range(2):
+            bi, aj = b2[:, i], a2[:, j]
+            g = before[rows, bi] + after[rows, aj] - whole
+            gain = np.where(bi != aj, np.maximum(gain, g), gain)
+    c = int(np.argmax(gain))
+    if gain[c] <= penalty:
+        return []
+    at = cut[c]
+    return (_change_points(logp[:at], frames[:at], min_run, penalty) + [int(frames[at])]
+            + _change_points(logp[at:], frames[at:], min_run, penalty))
+
+
+def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: str = "likelihood",
+                    p: float = 2.0, q: float = -0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Weights ``(S, M + 1)`` of each segment for each label (null last), higher is better, and
+    each segment's number of scored samples ``(S,)``."""
+    ok = seg >= 0
+    seg, m1 = seg[ok], samples.logp.shape[1]
+    count = np.bincount(seg, minlength=n_segments).astype(np.float64)
+    if score == "likelihood":
+        w = np.zeros((n_segments, m1))
+        np.add.at(w, seg, samples.logp[ok].astype(np.float64))
+        return w, count
+    if score == "power":
+        col = np.where(samples.label[ok] >= 0, samples.label[ok], m1 - 1).astype(np.int64)
+        acc = np.zeros((n_segments, m1))
+        np.add.at(acc, (seg, col), samples.confidence[ok].astype(np.float64) ** p)
+        s = np.maximum(count, 1.0)[:, None] ** q * acc ** (1.0 / p)
+        return s * count[:, None], count
+    raise ValueError(f"unknown voting score {score!r}: 'likelihood' or 'power'")
+
+
+def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[int, int] | None = None,
+                         candidates: int = 4, time_limit: float = 60.0) -> np.ndarray:
+    """The best label per segment (:data:`NULL` allowed) such that no two segments that overlap
+    in time share a label. ``locked`` fixes some segments' labels.
+
+    Args:
+        weights: ``(S, M + 1)`` (see :func:`segment_weights`), null in the last column.
+        segments: their frame ranges.
+        locked: ``{segment: label or NULL}``.
+        candidates: labels considered per segment (its best by weight); null is always one.
+
+    Returns:
+        int64 ``(S,)`` labels.
+    """
+    n, m1 = weights.shape
+    m = m1 - 1
+    locked = locked or {}
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    top = np.argsort(-weights[:, :m], axis=1)[:, :min(candidates, m)]
+    pairs = {(s, int(label)) for s in range(n) for label in top[s]}
+    pairs |= {(s, m) for s in range(n)}
+    pairs |= {(s, (m if label == NULL else label)) for s, label in locked.items()}
+    pairs = sorted(pairs)
+    var_seg = np.array([s for s, _ in pairs], dtype=np.int64)
+    var_lab = np.array([lab for _, lab in pairs], dtype=np.int64)
+    # Shortcut: if every segment's best label is already exclusive, that is optimal.
+    best = np.argmax(weights, axis=1)
+    for s, label in locked.items():
+        best[s] = m if label == NULL else label
+    if not _conflicts(best, segments, m):
+        return np.where(best == m, NULL, best)
+
+    rows, cols, n_rows = [], [], 0
+    # Each segment takes exactly one label (null included).
+    rows.append(var_seg)
+    cols.append(np.arange(len(pairs)))
+    n_rows = n
+    # Cliques: per label, the candidate segments alive at each candidate's start frame.
+    for label in range(m):
+        v = np.flatnonzero(var_lab == label)
+        if len(v) < 2:
+            continue
+        s = var_seg[v]
+        start, stop = segments.start[s], segments.stop[s]
+        alive = (start[None, :] <= start[:, None]) & (start[:, None] < stop[None, :])  # (clique at i, member j)
+        sizes = alive.sum(axis=1)
+        keep = np.flatnonzero(sizes >= 2)
+        if not len(keep):
+            continue
+        _, first = np.unique(np.packbits(alive[keep], axis=1), axis=0, return_index=True)
+        for i in keep[np.sort(first)]:
+            members = v[alive[i]]
+            rows.append(np.full(len(members), n_rows))
+            cols.append(members)
+            n_rows += 1
+    a = csr_matrix((np.ones(sum(len(r) for r in rows)), (np.concatenate(rows), np.concatenate(cols))),
+                   shape=(n_rows, len(pairs)))
+    lb_rows = np.concatenate([np.ones(n), np.zeros(n_rows - n)])
+    ub_rows = np.ones(n_rows)
+    lower = np.zeros(len(pairs))
+    for s, label in locked.items():
+        col = m if label == NULL else label
+        lower[np.flatnonzero((var_seg == s) & (var_lab == col))] = 1.0
+    cost = -weights[var_seg, var_lab]
+    res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=np.ones(len(pairs)),
+               bounds=Bounds(lower, np.ones(len(pairs))), options={"time_limit": time_limit})
+    if res.x is None:
+        raise ValueError(f"no exclusive labeling exists: {res.message}")
+    chosen = res.x > 0.5
+    out = np.full(n, m, dtype=np.int64)
+    out[var_seg[chosen]] = var_lab[chosen]
+    return np.where(out == m, NULL, out)
+
+
+def _conflicts(labels: np.ndarray, segments: Segments, m: int) -> bool:
+    """True if two overlapping segments share a real label."""
+    named = np.flatnonzero(labels < m)
+    order = named[np.lexsort((segments.start[named], labels[named]))]
+    # Sorted by start within a label; an overlap exists iff some start is before the running
+    # maximum stop of the earlier segments of that label.
+    for label in np.unique(labels[named]):
+        idx = order[labels[order] == label]
+        if len(idx) < 2:
+            continue
+        running = np.maximum.accumulate(segments.stop[idx])
+        if (segments.start[idx][1:] < running[:-1]).any():
+            return True
+    return False
+
+
+def check_constraints(constraints: list[Constraint], n_labels: int) -> None:
+    """Reject constraints that cannot all hold: a label outside the layout, or one label locked on
+    two slots over overlapping frames."""
+    for c in constraints:
+        if not (c.label == NULL or 0 <= c.label < n_labels):
+            raise ValueError(f"constraint on slot {c.slot}: label {c.label} is not in the layout")
+    named = [c for c in constraints if c.label >= 0]
+    for i, a in enumerate(named):
+        for b in named[i + 1:]:
+            if a.label != b.label or a.slot == b.slot or b.start >= a.stop or a.start >= b.stop:
+                continue
+            raise ValueError(f"constraints conflict: label {a.label} is locked on slot {a.slot} (frames "
+                             f"{a.start}-{a.stop - 1}) and on slot {b.slot} (frames {b.start}-{b.stop - 1})")
