@@ -13,6 +13,7 @@ from conftest import ROOT, data_path
 from helpers import small_take
 from mocap_autolabel.cli import main
 from mocap_autolabel.core.formats.c3d import write_c3d
+from mocap_autolabel.core.layout import load_layout
 
 
 def test_info_real_file(capsys):
@@ -79,16 +80,31 @@ def test_script_mode_like_blender_dash_p(tmp_path):
     assert _script().returncode == 2
 
 
-def test_label_demo_take_reports_accuracy_against_truth(capsys, tmp_path):
+def test_label_demo_take_writes_labeled_c3d_report_and_labels(capsys, tmp_path):
     import numpy as np
+    from mocap_autolabel.core.take import read_take
 
-    out = tmp_path / "labels.npz"
-    assert main(["label", str(ROOT / "samples" / "demo_take.c3d"), "--method", "set", "--labels", str(out)]) == 0
+    demo = ROOT / "samples" / "demo_take.c3d"
+    out, report, labels = tmp_path / "labeled.c3d", tmp_path / "report.json", tmp_path / "labels.npz"
+    assert main(["label", str(demo), "-o", str(out), "--report", str(report), "--labels", str(labels)]) == 0
     text = capsys.readouterr().out
-    assert "set on han19, 1200 frames" in text and "% correct" in text
-    saved = np.load(out)
-    assert saved["labels"].shape == saved["confidence"].shape and saved["labels"].shape[0] == 1200
-    assert list(saved["names"])[:2] == ["ThumbCMC", "ThumbMCP"]
+    assert "set + vote on han19, 1200 frames" in text and "% correct" in text
+    raw, labeled = read_take(demo), read_take(out)
+    assert labeled.names[:19] == load_layout("han19").names
+    assert all(n.startswith("*") for n in labeled.names[19:])
+    assert labeled.valid.sum() == raw.valid.sum()  # every sample kept, once
+    rep = json.loads(report.read_text())
+    assert rep["info"]["method"] == "set" and rep["info"]["temporal"] == "vote"
+    assert rep["truth"]["instances"] == 1200 * 19 and 0.0 <= rep["summary"]["confident_share"] <= 1.0
+    saved = np.load(labels)
+    assert saved["labels"].shape == saved["confidence"].shape == (1200, raw.n_points)
+
+
+def test_label_script_mode_writes_c3d(tmp_path):
+    out = tmp_path / "labeled.c3d"
+    result = _script("label", str(ROOT / "samples" / "demo_take.c3d"), "--temporal", "none", "-o", str(out))
+    assert result.returncode == 0, result.stderr
+    assert out.is_file() and "set + none" in result.stdout
 
 
 def test_label_errors(capsys, tmp_path):
@@ -99,6 +115,9 @@ def test_label_errors(capsys, tmp_path):
     err = capsys.readouterr().err.strip()
     assert err == f"error: {tmp_path / 'missing.onnx'}: model file not found"
     assert main(["train", "--layout", "han19", "-o", "model.pt"]) == 2
+    assert main(["label", demo, "-o", str(tmp_path / "out.trc")]) == 2
+    assert main(["label", demo, "--layout", "no_such_layout", "-o", str(tmp_path / "x.c3d")]) == 1
+    assert "no_such_layout" in capsys.readouterr().err and not (tmp_path / "x.c3d").exists()
 
 
 def test_train_command_writes_a_model_and_card(tmp_path, capsys):

@@ -55,15 +55,21 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--blend", metavar="OUT.blend",
                      help="also write a .blend with the raw markers and the true hand (armature, skin, markers)")
 
-    lab = sub.add_parser("label", help="label every frame of a take with one method (per-frame, no temporal step yet)")
-    lab.add_argument("file", metavar="FILE")
+    lab = sub.add_parser("label", help="label a raw take: per-frame scores, then a temporal decision per tracklet")
+    lab.add_argument("file", metavar="FILE", help="the raw take (C3D, TRC or Qualisys TSV)")
+    lab.add_argument("-o", "--output", metavar="OUT.c3d",
+                     help="labeled C3D: the layout's points by name, then the unassigned samples as *N points")
     lab.add_argument("--method", default="set", choices=("set", "perm", "cnn", "gmm", "nearest"),
-                     help="labeling method (default: set, ours)")
+                     help="per-frame labeler (default: set, ours)")
+    lab.add_argument("--temporal", default="vote", choices=("vote", "viterbi", "none"),
+                     help="vote: one label per tracklet segment (default); viterbi: N-best + Kalman (Alexanderson); "
+                          "none: per-frame labels")
     lab.add_argument("--layout", default="han19", help="built-in layout name or a layout .toml (default han19)")
     lab.add_argument("--model", metavar="MODEL.onnx", help="ONNX model for set/perm/cnn (default: the shipped one)")
     lab.add_argument("--fit", metavar="LABELED",
                      help="a labeled take of the subject: gmm fits on it; nearest starts from its first frame "
                           "(default for nearest: set's labels of the first frame)")
+    lab.add_argument("--report", metavar="REPORT.json", help="write counts, confidence, uncertain segments, timings")
     lab.add_argument("--labels", metavar="OUT.npz", help="write labels and confidences per frame and point slot")
 
     trn = sub.add_parser("train", help="train a 'set' model for a marker layout from synthetic data (needs PyTorch)")
@@ -193,67 +199,60 @@ def _import(args) -> int:
 def _label(args) -> int:
     import numpy as np
 
-    from .core.labelers import assign, frames_from_take, make_labeler
+    from .core.atomic import atomic_output
+    from .core.labeling import labeled_take
     from .core.layout import load_layout
+    from .core.pipeline import label_take
     from .core.synth.generate import load_truth, truth_path
     from .core.take import read_take
 
+    if args.output and not args.output.lower().endswith(".c3d"):
+        print(f"mocap_autolabel label: error: -o must name a .c3d file, got {args.output!r}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.method == "gmm" and not args.fit:
+        print("mocap_autolabel label: error: gmm needs --fit LABELED: a labeled take of the subject to fit on",
+              file=sys.stderr)
+        return EXIT_USAGE
     try:
         layout = load_layout(args.layout)
         take = read_take(args.file)
-        batch = frames_from_take(take)
-        options = {}
-        if args.method in ("gmm", "nearest"):
-            labeled = _labeled_positions(read_take(args.fit), layout) if args.fit else None
-            if args.method == "gmm":
-                if labeled is None:
-                    raise _UsageError("gmm needs --fit LABELED: a labeled take of the subject to fit on")
-            elif labeled is not None:
-                options["start"] = labeled[0]
-            else:
-                seed = make_labeler("set", layout)
-                first, _ = assign(seed.scores(batch.points[:1], batch.mask[:1]), batch.mask[:1])
-                start = np.full((len(layout), 3), np.nan)
-                ok = first[0] >= 0
-                start[first[0][ok]] = batch.points[0][ok]
-                options["start"] = start
-        labeler = make_labeler(args.method, layout, args.model, **options)
-        if args.method == "gmm":
-            labeler.fit(labeled)
-        labels, confidence = labeler.label(batch)
-    except _UsageError as exc:
-        print(f"mocap_autolabel label: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        labeled = _labeled_positions(read_take(args.fit), layout) if args.fit else None
+        labeling = label_take(take, layout, method=args.method, temporal=args.temporal, model=args.model,
+                              fit=labeled if args.method == "gmm" else None,
+                              start=labeled[0] if (labeled is not None and args.method == "nearest") else None)
+        if args.output:
+            from .core.formats.c3d import write_c3d
+
+            write_c3d(labeled_take(take, labeling), args.output)
     except Exception as exc:
         return _fail(args.file, exc)
-    valid = batch.mask
-    named = (labels >= 0) & valid
-    print(f"{args.file}: {args.method} on {layout.name}, {len(batch)} frames, {int(valid.sum()):,} observations; "
-          f"{100 * named.sum() / max(valid.sum(), 1):.1f} % labeled, "
-          f"{100 * (~named & valid).sum() / max(valid.sum(), 1):.1f} % null, "
-          f"mean confidence {confidence[valid].mean():.3f}")
+    summary = labeling.summary()
+    seconds = labeling.info["seconds"]["total"]
+    print(f"{args.file}: {args.method} + {args.temporal} on {layout.name}, {take.n_frames} frames in {seconds:.2f} s "
+          f"({take.n_frames / max(seconds, 1e-9):,.0f} frames/s); {summary['labeled_segments']} segments labeled, "
+          f"{summary['null_segments']} null; {100 * summary['confident_share']:.1f} % of labeled samples confident, "
+          f"{len(summary['uncertain_segments'])} uncertain segments")
+    report = {"file": args.file, "info": labeling.info, "summary": summary}
     tpath = truth_path(args.file)
     if os.path.isfile(tpath):
         from .core.metrics import score_labeling
 
         truth = load_truth(tpath)["labels"]
-        t = np.where(batch.slots >= 0, truth[np.arange(len(batch))[:, None], np.maximum(batch.slots, 0)], -2)
-        t = np.where(valid & (t == -2), -1, t)
-        score = score_labeling(labels, t, valid, len(layout))
+        score = score_labeling(labeling.per_sample(), truth, take.valid, len(layout))
+        report["truth"] = score.as_dict()
         print(f"  truth    {tpath}: {100 * score.accuracy:.2f} % correct, {100 * score.frame_accuracy:.2f} % of frames "
               f"all correct ({score.erroneous} erroneous, {score.false_marker} false marker, "
               f"{score.false_occlusion} false occlusion)")
+    if args.output:
+        print(f"  labeled  {args.output}")
+    if args.report:
+        with atomic_output(args.report) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(report, fh, indent=1)
+        print(f"  report   {args.report}")
     if args.labels:
-        from .core.atomic import atomic_output
-
-        per_slot = np.full((len(batch), take.n_points), -1, dtype=np.int16)
-        conf = np.zeros((len(batch), take.n_points), dtype=np.float32)
-        f, k = np.nonzero(valid)
-        per_slot[f, batch.slots[f, k]] = labels[f, k]
-        conf[f, batch.slots[f, k]] = confidence[f, k]
-        with atomic_output(args.labels) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(fh, labels=per_slot, confidence=conf, names=np.array(layout.names))
+        with atomic_output(args.labels) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(fh, labels=labeling.per_sample(), confidence=labeling.per_sample_confidence(),
+                                names=np.array(layout.names))
         print(f"  labels   {args.labels}")
     return EXIT_OK
 

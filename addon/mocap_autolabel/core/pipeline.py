@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from .errors import MocapInputError
-from .labelers import METHODS, FrameBatch, make_labeler, pack_frames
+from .labelers import METHODS, FrameBatch, Labeler, make_labeler, pack_frames
 from .labelers.assign import assign, row_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, segments_from_runs
 from .layout import Layout
@@ -23,11 +23,8 @@ from .temporal.voting import (
     Samples,
     Segments,
     check_constraints,
-    exclusive_assignment,
-    find_swaps,
-    segment_of,
-    segment_weights,
     split_segments,
+    vote,
 )
 from .tracklets import find_tracklets
 
@@ -108,7 +105,8 @@ def _apply_constraints(scores: np.ndarray, slots: np.ndarray, mask: np.ndarray,
 def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = "vote",
                constraints: Sequence[Constraint] = (), model: str | None = None, fit: np.ndarray | None = None,
                start: np.ndarray | None = None, score: str = "likelihood", p: float = 2.0, q: float = -0.5,
-               n_best: int = 5, split_swaps: bool = True, progress: Callable[[str], None] | None = None) -> Labeling:
+               n_best: int = 5, split_swaps: bool = True, labeler: Labeler | None = None,
+               progress: Callable[[str], None] | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -123,6 +121,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         score: voting score, ``"likelihood"`` (ours) or ``"power"`` (Ghorbani's, with ``p``, ``q``).
         n_best: hypotheses per frame for ``viterbi``.
         split_swaps: split a tracklet where its evidence flips for good (``vote`` only).
+        labeler: a ready labeler to use instead of building one from ``method`` (e.g. a ``gmm``
+            fitted once for a performer and used for all their takes).
         progress: called with a short message at each stage.
 
     Returns:
@@ -151,7 +151,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
 
     say(f"scoring {take.n_frames} frames with {method}")
     t = time.perf_counter()
-    labeler = _labeler(method, layout, model, fit, start, take, batch)
+    labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
     scores = labeler.scores(points, mask)
     scores = _apply_constraints(scores, slots, mask, constraints)
     times["scores"] = time.perf_counter() - t
@@ -175,17 +175,10 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     info = {"method": method, "temporal": temporal, "layout": layout.name, "frames": take.n_frames,
             "slots": take.n_points, "constraints": len(constraints)}
     if temporal == "vote":
-        seg = segment_of(segments, samples.frame, samples.slot)
-        swaps = find_swaps(samples, seg, segments) if split_swaps else {}
-        if swaps:
-            segments = split_segments(segments, swaps)
-            seg = segment_of(segments, samples.frame, samples.slot)
-        info["swaps_split"] = int(sum(len(v) for v in swaps.values()))
-        weights, count = segment_weights(samples, seg, len(segments), score, p, q)
+        segments, label, seg, facts = vote(samples, segments, locked_at, score, p, q, split_swaps)
+        info.update(facts)
         first_locked = locked_at[segments.start, segments.slot]
-        locked = {int(s): int(first_locked[s]) for s in np.flatnonzero(first_locked != EMPTY)}
-        label = exclusive_assignment(weights, segments, locked)
-        label[(count == 0) & (first_locked == EMPTY)] = NULL  # never scored (beyond the cap): no evidence
+        count = np.bincount(seg[seg >= 0], minlength=len(segments))
         prob = np.exp(samples.logp.astype(np.float64))
         m = len(layout)
         col = np.where(label == NULL, m, label)

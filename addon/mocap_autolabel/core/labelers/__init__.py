@@ -25,6 +25,26 @@ METHODS = ("set", "perm", "cnn", "gmm", "nearest")
 ONNX_METHODS = ("set", "perm", "cnn")
 
 
+_LOADED: dict[tuple, Labeler] = {}
+
+
+def _cached_onnx(path: str, layout: Layout) -> Labeler:
+    """Loading a model (checksum, session) costs more than labeling a short take: keep the last
+    few, keyed by file identity and layout, so a batch of takes loads each model once."""
+    from .onnx_labeler import OnnxLabeler
+
+    try:
+        st = os.stat(path)
+        key = (os.path.abspath(path), st.st_mtime_ns, st.st_size, layout.name, tuple(layout.names))
+    except OSError:
+        return OnnxLabeler(path, layout)  # reports the missing file
+    if key not in _LOADED:
+        if len(_LOADED) >= 8:
+            _LOADED.pop(next(iter(_LOADED)))
+        _LOADED[key] = OnnxLabeler(path, layout)
+    return _LOADED[key]
+
+
 def make_labeler(method: str, layout: Layout, model: str | os.PathLike | None = None, **options) -> Labeler:
     """A labeler by name.
 
@@ -35,13 +55,13 @@ def make_labeler(method: str, layout: Layout, model: str | os.PathLike | None = 
         options: passed to the ``gmm`` / ``nearest`` constructors.
     """
     if method in ONNX_METHODS:
-        from .onnx_labeler import OnnxLabeler, shipped_model
+        from .onnx_labeler import shipped_model
 
         path = os.fspath(model) if model is not None else shipped_model(method, layout.name)
         if model is None and not os.path.isfile(path):
             raise MocapInputError(path, f"no shipped '{method}' model for layout '{layout.name}'; "
                                         f"train one with: python -m mocap_autolabel train --layout ... -o model.onnx")
-        labeler = OnnxLabeler(path, layout)
+        labeler = _cached_onnx(path, layout)
         if labeler.name != method:
             raise MocapInputError(path, f"model is a '{labeler.name}' model, not '{method}'")
         return labeler

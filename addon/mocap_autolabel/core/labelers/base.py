@@ -45,7 +45,7 @@ def pack_frames(positions: np.ndarray, max_points: int | None = None) -> FrameBa
 
     ``K`` is the largest number of valid points in any frame (at least 1), or ``max_points``
     when given; frames with more valid points than ``max_points`` keep the ones nearest their
-    median point (the hand, when distractors are far away).
+    densest point (the hand: its markers crowd together, ghosts and other markers spread out).
     """
     positions = np.asarray(positions, dtype=np.float32)
     valid = np.isfinite(positions).all(axis=2)
@@ -53,11 +53,15 @@ def pack_frames(positions: np.ndarray, max_points: int | None = None) -> FrameBa
     counts = valid.sum(axis=1)
     k = max(1, int(counts.max(initial=0)))
     if max_points is not None and k > max_points:
-        centre = np.nanmedian(np.where(valid[..., None], positions, np.nan), axis=1, keepdims=True)
-        dist = np.linalg.norm(np.nan_to_num(positions - centre, nan=np.inf), axis=2)
-        keep = np.argsort(np.where(valid, dist, np.inf), axis=1, kind="stable")[:, :max_points]
-        keep = np.sort(keep, axis=1)  # slot order, as without the limit
-        valid = np.take_along_axis(valid, keep, axis=1)
+        keep = np.argsort(~valid, axis=1, kind="stable")[:, :max_points]  # valid slots first
+        ok = np.take_along_axis(valid, keep, axis=1)
+        for f in np.flatnonzero(counts > max_points):
+            chosen = _densest(positions[f], valid[f], max_points)
+            keep[f] = 0
+            keep[f, :len(chosen)] = chosen
+            ok[f] = np.arange(max_points) < len(chosen)
+        order = np.argsort(np.where(ok, keep, n_points + keep), axis=1, kind="stable")
+        keep, valid = np.take_along_axis(keep, order, axis=1), np.take_along_axis(ok, order, axis=1)
         slots = keep
         k = max_points
     else:
@@ -70,6 +74,19 @@ def pack_frames(positions: np.ndarray, max_points: int | None = None) -> FrameBa
     points = np.where(mask[..., None], points, 0.0).astype(np.float32)
     slots[~mask] = -1
     return FrameBatch(points, mask, slots)
+
+
+def _densest(points: np.ndarray, valid: np.ndarray, n: int, radius: float = 0.08, reach: float = 0.3) -> np.ndarray:
+    """Indices of at most ``n`` valid points: those nearest the point with the most neighbours
+    within ``radius``, none further than ``reach`` from it (a hand spans about 0.2 m)."""
+    from scipy.spatial import cKDTree
+
+    idx = np.flatnonzero(valid)
+    tree = cKDTree(points[idx])
+    crowd = tree.query_ball_point(points[idx], radius, return_length=True)
+    centre = points[idx[int(np.argmax(crowd))]]
+    dist, near = tree.query(centre, k=min(n, len(idx)))
+    return idx[np.atleast_1d(near)[np.atleast_1d(dist) <= reach]]
 
 
 def frames_from_take(take: Take, max_points: int | None = None) -> FrameBatch:

@@ -194,19 +194,31 @@ def _slip(rng: np.random.Generator, binding: Binding, normals: np.ndarray, slip:
 
 
 def _pack(rng: np.random.Generator, tracks: np.ndarray, track_labels: np.ndarray,
-          flicker: list[tuple[int, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+          flicker: list[tuple[int, np.ndarray]], breaks: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Cut every track at its gaps and lay the runs into ``*N`` slots, as a capture system would.
 
-    Every run starts a new trajectory. To keep files small a slot is reused once its previous
-    run has ended (with at least one empty frame between), so a slot can hold several runs; the
-    runs are laid in order of their start, ties in random order, so slot order says nothing
-    about labels.
+    ``track_labels`` is ``(T,)`` (one label per track) or ``(F, T)`` (per frame: a track whose
+    identity changes, a swap). ``breaks`` bool ``(F, T)`` also ends a run before each True frame
+    (a trajectory broken without a gap). Every run starts a new trajectory. To keep files small a
+    slot is reused once its previous run has ended (with at least one empty frame between), so a
+    slot can hold several runs; the runs are laid in order of their start, ties in random order,
+    so slot order says nothing about labels.
 
     Returns:
         positions float32 ``(F, S, 3)`` and truth labels int16 ``(F, S)``.
     """
     frames = tracks.shape[0]
-    run_track, run_start, run_stop = mask_runs(~np.isnan(tracks[..., 0]))
+    present = ~np.isnan(tracks[..., 0])
+    if breaks is not None:  # a one-frame hole in a doubled time axis splits the run there
+        doubled = np.zeros((2 * frames, tracks.shape[1]), dtype=bool)
+        doubled[0::2] = present
+        doubled[1::2] = present
+        doubled[1:-1:2] &= ~breaks[1:]
+        run_track, run_start, run_stop = mask_runs(doubled)
+        run_start, run_stop = (run_start + 1) // 2, (run_stop + 1) // 2
+    else:
+        run_track, run_start, run_stop = mask_runs(present)
+    truth = np.broadcast_to(track_labels, (frames, tracks.shape[1]))
     n_tracks = len(run_track)
     starts = np.concatenate([run_start, [a for a, _ in flicker]]).astype(np.int64)
     stops = np.concatenate([run_stop, [a + len(p) for a, p in flicker]]).astype(np.int64)
@@ -227,7 +239,7 @@ def _pack(rng: np.random.Generator, tracks: np.ndarray, track_labels: np.ndarray
         a, b, slot = starts[i], stops[i], slot_of[i]
         if i < n_tracks:
             positions[a:b, slot] = tracks[a:b, run_track[i]]
-            labels[a:b, slot] = track_labels[run_track[i]]
+            labels[a:b, slot] = truth[a:b, run_track[i]]
         else:
             positions[a:b, slot] = flicker[i - n_tracks][1]
             labels[a:b, slot] = GHOST
@@ -285,3 +297,77 @@ def load_truth(path: str | os.PathLike) -> dict:
         out = {k: z[k] for k in ("labels", "markers", "poses")}
         out["info"] = json.loads(z["info"].item())
     return out
+
+
+@dataclass(frozen=True)
+class TakeCorruption:
+    """How :func:`corrupt_take` turns clean labeled marker tracks into a raw take (rates per
+    marker unless said otherwise; times in seconds, lengths in metres)."""
+
+    gaps_per_minute: float = 10.0  # run-length occlusions
+    mean_gap_s: float = 0.25
+    fragments_per_minute: float = 3.0  # trajectory broken without a gap (a new *N slot)
+    swap_share: float = 0.3  # share of takes in which the two markers that pass closest trade trajectories
+    swap_distance: float = 0.02  # ...if they come this close
+    flicker_ghosts_per_frame: float = 1.0  # per take
+    ghost_mean_frames: float = 4.0
+    persistent_ghosts: int = 1  # per take, 1-3 s long
+    noise_sd: float = 0.0
+
+
+def corrupt_take(markers: np.ndarray, rate: float, seed: int, cfg: TakeCorruption | None = None,
+                 extra: np.ndarray | None = None) -> tuple[Take, np.ndarray, dict]:
+    """A raw take from clean labeled tracks, with gaps, fragments, swaps and ghost tracklets.
+
+    Args:
+        markers: ``(F, M, 3)`` true marker positions in metres (NaN where truly missing).
+        rate: frames per second.
+        seed: random seed.
+        cfg: the corruption.
+        extra: optional ``(F, E, 3)`` tracks of other markers (body, objects): kept as distractors.
+
+    Returns:
+        the take (``*N`` slots), the truth int16 ``(F, S)`` (label, :data:`GHOST` or :data:`EMPTY`)
+        and facts about what was done (swaps).
+    """
+    cfg = cfg or TakeCorruption()
+    rng = np.random.default_rng(seed)
+    frames, m, _ = markers.shape
+    tracks = np.array(markers, dtype=np.float64)
+    truth = np.broadcast_to(np.arange(m), (frames, m)).copy()
+    facts = {"swaps": 0}
+    if rng.random() < cfg.swap_share and frames > 2:
+        d = np.linalg.norm(tracks[:, :, None] - tracks[:, None, :], axis=3)
+        d[:, np.arange(m), np.arange(m)] = np.inf
+        d = np.where(np.isnan(d), np.inf, d)
+        f, a, b = np.unravel_index(np.argmin(d[1:-1]), d[1:-1].shape)
+        f += 1
+        if d[f, a, b] < cfg.swap_distance:
+            tracks[f:, [a, b]] = tracks[f:, [b, a]]
+            truth[f:, [a, b]] = truth[f:, [b, a]]
+            facts["swaps"] = 1
+    missing = gap_mask(rng, frames, m, cfg.gaps_per_minute / 60.0 / rate, cfg.mean_gap_s * rate)
+    tracks[missing] = np.nan
+    if cfg.noise_sd > 0:
+        tracks += rng.normal(0.0, cfg.noise_sd, size=tracks.shape)
+    centre = np.nanmean(markers, axis=1)
+    centre = np.where(np.isnan(centre), np.nanmean(centre, axis=0), centre)
+    eye = np.broadcast_to(np.eye(3), (frames, 3, 3))
+    parts, labels = [tracks], [truth]
+    if cfg.persistent_ghosts:
+        dur = (int(1.0 * rate), int(3.0 * rate))
+        parts.append(persistent_ghosts(rng, centre, eye, cfg.persistent_ghosts, dur, (0.08, 0.25)))
+        labels.append(np.full((frames, cfg.persistent_ghosts), GHOST))
+    if extra is not None:
+        parts.append(np.asarray(extra, dtype=np.float64))
+        labels.append(np.full((frames, extra.shape[1]), GHOST))
+    flicker = []
+    if cfg.flicker_ghosts_per_frame > 0:
+        flicker = flicker_ghosts(rng, centre, eye, cfg.flicker_ghosts_per_frame, 0.05, 0.3, 0.3,
+                                 cfg.ghost_mean_frames, 1e-4)
+    all_tracks = np.concatenate(parts, axis=1)
+    breaks = gap_mask(rng, frames, all_tracks.shape[1], cfg.fragments_per_minute / 60.0 / rate, 1.0)
+    positions, truth_slots = _pack(rng, all_tracks, np.concatenate(labels, axis=1), flicker, breaks)
+    take = Take(positions=positions, names=[f"*{i}" for i in range(positions.shape[1])], rate=rate,
+                source_units="mm", vendor="mocap_autolabel corrupt_take")
+    return take, truth_slots, facts

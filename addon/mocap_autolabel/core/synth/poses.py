@@ -99,6 +99,8 @@ def sample_joint_angles(rng: np.random.Generator, n: int, canonical: float = 0.4
     out[:] = uniform
     out[kind < canonical + synergy] = syn[kind < canonical + synergy]
     out[kind < canonical] = picks[kind < canonical] + jitter[kind < canonical]
+    if together <= 0:  # draw nothing: the random stream (and every seeded take) stays as it was
+        return np.clip(out, _LO, _HI)
     closed = rng.random(n) < together
     flex = np.array([JOINT_NAMES.index(f"{f}_{j}") for f in FINGERS for j in ("mcp_flex", "pip", "dip")])
     shared = out[closed][:, flex].reshape(-1, len(FINGERS), 3).mean(axis=1, keepdims=True)  # one flexion, all fingers

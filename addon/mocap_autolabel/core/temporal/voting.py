@@ -146,6 +146,10 @@ def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: s
         w = np.zeros((n_segments, m1))
         np.add.at(w, seg, samples.logp[ok].astype(np.float64))
         return w, count
+    if score == "soft":
+        w = np.zeros((n_segments, m1))
+        np.add.at(w, seg, np.exp(samples.logp[ok].astype(np.float64)))
+        return w, count
     if score == "power":
         col = np.where(samples.label[ok] >= 0, samples.label[ok], m1 - 1).astype(np.int64)
         acc = np.zeros((n_segments, m1))
@@ -228,6 +232,64 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     out = np.full(n, m, dtype=np.int64)
     out[var_seg[chosen]] = var_lab[chosen]
     return np.where(out == m, NULL, out)
+
+
+def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str = "likelihood", p: float = 2.0,
+         q: float = -0.5, split_swaps: bool = True, refine: int = 3) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
+    """Trajectory voting end to end: split swaps, weigh, assign exclusively, refine where it clashed.
+
+    A segment that lost its best label to an overlapping segment is cut at the edges of that
+    overlap and the pieces decided again (at most ``refine`` rounds): a short overlap must not
+    cost a long segment its label.
+
+    Args:
+        samples: the scored samples.
+        segments: tracklets (already cut at the edges of user constraints).
+        locked_at: int ``(F, P)``: the locked label of each sample (:data:`NULL` = ghost), or a
+            value below -1 where unlocked.
+
+    Returns:
+        the final segments, their labels int64 ``(S,)``, the segment of each sample ``(n,)`` and
+        facts (swaps split, refinement rounds).
+    """
+    seg = segment_of(segments, samples.frame, samples.slot)
+    swaps = find_swaps(samples, seg, segments) if split_swaps else {}
+    if swaps:
+        segments = split_segments(segments, swaps)
+        seg = segment_of(segments, samples.frame, samples.slot)
+    facts = {"swaps_split": int(sum(len(v) for v in swaps.values())), "refined": 0}
+    while True:
+        weights, count = segment_weights(samples, seg, len(segments), score, p, q)
+        first_locked = locked_at[segments.start, segments.slot]
+        locked = {int(i): int(first_locked[i]) for i in np.flatnonzero(first_locked >= NULL)}
+        labels = exclusive_assignment(weights, segments, locked)
+        labels[(count == 0) & (first_locked < NULL)] = NULL  # never scored (beyond the cap): no evidence
+        if facts["refined"] >= refine:
+            break
+        cuts = _clash_cuts(weights, labels, segments, first_locked >= NULL)
+        if not cuts:
+            break
+        segments = split_segments(segments, cuts)
+        seg = segment_of(segments, samples.frame, samples.slot)
+        facts["refined"] += 1
+    return segments, labels, seg, facts
+
+
+def _clash_cuts(weights: np.ndarray, labels: np.ndarray, segments: Segments,
+                locked: np.ndarray) -> dict[int, list[int]]:
+    """Where a segment lost its best label to overlapping segments: cut it at their edges."""
+    m = weights.shape[1] - 1
+    best = np.argmax(weights[:, :m], axis=1)
+    lost = np.flatnonzero((labels != best) & (weights[np.arange(len(labels)), best] > weights[:, m]) & ~locked)
+    cuts: dict[int, list[int]] = {}
+    for s in lost:
+        rivals = np.flatnonzero((labels == best[s]) & (segments.start < segments.stop[s])
+                                & (segments.start[s] < segments.stop))
+        edges = [int(e) for r in rivals for e in (segments.start[r], segments.stop[r])
+                 if segments.start[s] < e < segments.stop[s]]
+        if edges:
+            cuts.setdefault(int(segments.slot[s]), []).extend(edges)
+    return cuts
 
 
 def _conflicts(labels: np.ndarray, segments: Segments, m: int) -> bool:

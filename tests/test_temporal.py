@@ -1,0 +1,264 @@
+"""Temporal labeling: voting with exclusivity, swaps, constraints, Viterbi, confidence, label_take."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from conftest import data_path
+from mocap_autolabel.core.errors import MocapInputError
+from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint, labeled_take, segments_from_runs
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
+from mocap_autolabel.core.take import Take, read_take
+from mocap_autolabel.core.temporal.confidence import fit_calibration
+from mocap_autolabel.core.temporal.viterbi import viterbi_labels
+from mocap_autolabel.core.temporal.voting import (
+    Samples,
+    Segments,
+    exclusive_assignment,
+    find_swaps,
+    segment_of,
+    split_segments,
+)
+
+
+def _segments(starts, stops, slots=None) -> Segments:
+    n = len(starts)
+    slots = np.arange(n) if slots is None else np.asarray(slots)
+    return Segments(np.asarray(slots, dtype=np.int64), np.asarray(starts, dtype=np.int64),
+                    np.asarray(stops, dtype=np.int64))
+
+
+def _brute_force(weights, segs, locked):
+    n, m1 = weights.shape
+    m = m1 - 1
+    best = -np.inf
+    for combo in itertools.product(range(m1), repeat=n):
+        if any((combo[s] if combo[s] < m else NULL) != lab for s, lab in locked.items()):
+            continue
+        ok = True
+        for a in range(n):
+            for b in range(a + 1, n):
+                overlap = segs.start[a] < segs.stop[b] and segs.start[b] < segs.stop[a]
+                if overlap and combo[a] == combo[b] and combo[a] < m:
+                    ok = False
+        if ok:
+            best = max(best, sum(weights[s, combo[s]] for s in range(n)))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_exclusive_assignment_is_optimal(seed):
+    rng = np.random.default_rng(seed)
+    n, m = 6, 3
+    start = rng.integers(0, 20, n)
+    segs = _segments(start, start + rng.integers(1, 15, n))
+    weights = rng.normal(size=(n, m + 1)) * 5
+    weights[:, :m] += 4.0  # real labels usually beat null, so conflicts happen
+    locked = {0: int(rng.integers(-1, m))} if seed % 3 == 0 else {}
+    labels = exclusive_assignment(weights, segs, locked, candidates=m)
+    col = np.where(labels == NULL, m, labels)
+    got = weights[np.arange(n), col].sum()
+    assert got == pytest.approx(_brute_force(weights, segs, locked))
+    for s, lab in locked.items():
+        assert labels[s] == lab
+    for a in range(n):  # exclusivity holds
+        for b in range(a + 1, n):
+            if segs.start[a] < segs.stop[b] and segs.start[b] < segs.stop[a] and labels[a] >= 0:
+                assert labels[a] != labels[b]
+
+
+def test_exclusivity_is_an_assignment_not_greedy():
+    # Both overlapping segments prefer label 0. Greedy (strongest first) gives segment 1 label 0
+    # and segment 0 label 1: 10.5 + 2. The assignment gives 10 + 9.8.
+    segs = _segments([0, 5], [10, 15])
+    weights = np.array([[10.0, 2.0, 0.0], [10.5, 9.8, 0.0]])
+    assert list(exclusive_assignment(weights, segs)) == [0, 1]
+
+
+def test_split_segments_and_lookup():
+    segs = split_segments(_segments([0, 0], [10, 8], slots=[0, 1]), {0: [4, 7, 12], 1: [0]})
+    assert list(zip(segs.slot, segs.start, segs.stop)) == [(0, 0, 4), (0, 4, 7), (0, 7, 10), (1, 0, 8)]
+    got = segment_of(segs, np.array([0, 4, 9, 10, 3]), np.array([0, 0, 0, 0, 1]))
+    assert list(got) == [0, 1, 2, -1, 3]
+
+
+def test_find_swaps_cuts_where_the_evidence_flips():
+    frames, m = 60, 4
+    logp = np.full((frames, m + 1), -8.0, dtype=np.float32)
+    logp[:35, 1] = -0.05
+    logp[35:, 2] = -0.05
+    logp[20, 3] = -0.01  # one odd frame is no swap
+    samples = Samples(frame=np.arange(frames), slot=np.zeros(frames, dtype=np.int64), logp=logp,
+                      label=np.argmax(logp, axis=1), confidence=np.ones(frames, dtype=np.float32))
+    segs = _segments([0], [frames])
+    assert find_swaps(samples, np.zeros(frames, dtype=np.int64), segs) == {0: [35]}
+    logp[35:, 2], logp[35:, 1] = -8.0, -0.05  # no flip: no cut
+    samples.label = np.argmax(logp, axis=1)
+    assert find_swaps(samples, np.zeros(frames, dtype=np.int64), segs) == {}
+
+
+def test_segments_from_runs_round_trip():
+    labels = np.array([[0, 1], [0, 1], [2, NULL], [2, NULL]])
+    valid = np.array([[True, True], [True, False], [True, True], [True, True]])
+    conf = np.full(labels.shape, 0.5, dtype=np.float32)
+    lab = segments_from_runs(["a", "b", "c"], labels, conf, valid, {})
+    assert list(zip(lab.slot, lab.start, lab.stop, lab.label)) == [(0, 0, 2, 0), (0, 2, 4, 2), (1, 0, 1, 1),
+                                                                   (1, 2, 4, NULL)]
+    per = lab.per_sample()
+    assert (per[valid] == labels[valid]).all() and (per[~valid] == EMPTY).all()
+
+
+@pytest.fixture(scope="module")
+def han19():
+    return load_layout("han19")
+
+
+@pytest.fixture(scope="module")
+def synth_take(han19):
+    return synthesize(han19, 1500, seed=11)
+
+
+def _accuracy(labeling, take, truth):
+    per = labeling.per_sample()
+    t = np.where(truth == GHOST, NULL, truth)
+    return float((per[take.valid] == t[take.valid]).mean())
+
+
+def test_vote_fixes_per_frame_flicker(han19, synth_take):
+    none = label_take(synth_take.take, han19, temporal="none")
+    vote = label_take(synth_take.take, han19, temporal="vote")
+    a_none, a_vote = _accuracy(none, synth_take.take, synth_take.labels), _accuracy(vote, synth_take.take,
+                                                                                   synth_take.labels)
+    assert a_vote > a_none and a_vote > 0.995
+    # Exclusivity: no label twice in a frame.
+    per = vote.per_sample()
+    for j in range(len(han19)):
+        assert ((per == j).sum(axis=1) <= 1).all()
+    assert vote.info["seconds"]["total"] > 0 and 0 <= vote.confidence.min() <= vote.confidence.max() <= 1
+
+
+def test_constraints_are_honoured_and_propagate(han19, synth_take):
+    take, _truth = synth_take.take, synth_take.labels
+    base = label_take(take, han19)
+    # Lock the longest labeled segment to the label of another segment that overlaps it.
+    order = np.argsort(-base.length)
+    a = next(i for i in order if base.label[i] >= 0)
+    overlap = (base.start < base.stop[a]) & (base.start[a] < base.stop) & (base.label >= 0)
+    overlap &= base.slot != base.slot[a]
+    b = int(np.flatnonzero(overlap)[0])
+    ghost = next(i for i in order if base.label[i] >= 0 and i not in (a, b) and base.slot[i] != base.slot[b])
+    cons = [Constraint(int(base.slot[a]), int(base.start[a]), int(base.stop[a]), int(base.label[b])),
+            Constraint(int(base.slot[ghost]), int(base.start[ghost]), int(base.stop[ghost]), NULL)]
+    for temporal in ("vote", "none", "viterbi"):
+        lab = label_take(take, han19, temporal=temporal, constraints=cons)
+        per = lab.per_sample()
+        rows = slice(base.start[a], base.stop[a])
+        on_a = per[rows, base.slot[a]]
+        assert (on_a[take.valid[rows, base.slot[a]]] == base.label[b]).all(), temporal
+        others = np.delete(per[rows], base.slot[a], axis=1)
+        assert not (others == base.label[b]).any(), temporal  # the label is taken there
+        g = slice(base.start[ghost], base.stop[ghost])
+        assert (per[g, base.slot[ghost]][take.valid[g, base.slot[ghost]]] == NULL).all(), temporal
+        locked = lab.locked
+        assert locked.any() and (lab.confidence[locked] == 1.0).all()
+
+
+def test_conflicting_or_bad_constraints_are_clear_errors(han19, synth_take):
+    take = synth_take.take
+    with pytest.raises(ValueError, match="constraints conflict"):
+        label_take(take, han19, constraints=[Constraint(0, 0, 10, 3), Constraint(1, 5, 20, 3)])
+    with pytest.raises(ValueError, match="outside the take"):
+        label_take(take, han19, constraints=[Constraint(999, 0, 10, 3)])
+    with pytest.raises(ValueError, match="not in the layout"):
+        label_take(take, han19, constraints=[Constraint(0, 0, 10, 42)])
+
+
+def test_swap_inside_a_tracklet_is_split(han19):
+    seen = 0
+    for seed in range(6):
+        markers = synthesize(han19, 600, seed=200 + seed).markers
+        take, truth, facts = corrupt_take(markers, 120.0, seed, TakeCorruption(
+            swap_share=1.0, swap_distance=0.05, gaps_per_minute=0, fragments_per_minute=0,
+            flicker_ghosts_per_frame=0, persistent_ghosts=0))
+        if not facts["swaps"]:
+            continue
+        seen += 1
+        lab = label_take(take, han19)
+        assert lab.info["swaps_split"] >= 1
+        assert _accuracy(lab, take, truth) > 0.99
+    assert seen
+
+
+def test_viterbi_follows_motion_when_a_frame_is_ambiguous():
+    # Two markers on straight lines; in frame 10 the scores favour swapping them, slightly.
+    frames, m = 20, 2
+    t = np.arange(frames)[:, None] / 120.0
+    a = np.concatenate([t * 0.3, np.zeros((frames, 2))], axis=1)
+    b = a + np.array([0.0, 0.01, 0.0])
+    points = np.stack([a, b], axis=1).astype(np.float32)
+    scores = np.full((frames, 2, m + 1), -6.0)
+    scores[:, 0, 0] = scores[:, 1, 1] = -0.1
+    scores[10, 0, 0] = scores[10, 1, 1] = -1.0
+    scores[10, 0, 1] = scores[10, 1, 0] = -0.8
+    mask = np.ones((frames, 2), dtype=bool)
+    labels = viterbi_labels(scores, mask, points, 120.0)
+    assert (labels[:, 0] == 0).all() and (labels[:, 1] == 1).all()
+
+
+def test_calibration_is_monotone_and_conservative():
+    rng = np.random.default_rng(0)
+    raw = rng.random(4000)
+    correct = rng.random(4000) < raw  # truly calibrated raw scores
+    cal = fit_calibration(raw, np.full(4000, 50), correct)
+    xs = np.linspace(0, 1, 101)
+    ys = cal(xs, np.full(101, 50))
+    assert (np.diff(ys) >= -1e-9).all()
+    assert (ys <= xs + 0.05).all()  # never promises more than the data shows
+    assert cal(np.array([0.9]), np.array([2]))[0] == 0.0  # no short segments seen: no confidence
+
+
+def test_empty_and_ghost_flooded_takes(han19, synth_take):
+    empty = Take(positions=np.full((10, 3, 3), np.nan, dtype=np.float32), names=["*0", "*1", "*2"], rate=100.0,
+                 source="empty.c3d")
+    with pytest.raises(MocapInputError, match="empty.c3d: the take has no marker samples"):
+        label_take(empty, han19)
+    # Thousands of ghosts per frame: bounded work, the hand still labeled.
+    rng = np.random.default_rng(1)
+    hand = synth_take.take.positions[:30]
+    ghosts = rng.uniform(-3, 3, size=(30, 3000, 3)).astype(np.float32)
+    take = Take(positions=np.concatenate([hand, ghosts], axis=1), names=[f"*{i}" for i in range(hand.shape[1] + 3000)],
+                rate=120.0)
+    lab = label_take(take, han19)
+    per = lab.per_sample()
+    far = np.linalg.norm(ghosts - np.nanmean(hand, axis=1, keepdims=True), axis=2) > 0.3
+    assert (per[:, hand.shape[1]:][far] == NULL).all()  # ghosts away from the hand: never labeled
+    assert (per[:, :hand.shape[1]] >= 0).sum() > 0.9 * (synth_take.labels[:30] >= 0).sum()
+
+
+def _conserved(take: Take, labeled: Take) -> None:
+    assert labeled.valid.sum() == take.valid.sum()
+    for f in range(0, take.n_frames, max(1, take.n_frames // 50)):
+        a = np.sort(take.positions[f][take.valid[f]], axis=0)
+        b = np.sort(labeled.positions[f][labeled.valid[f]], axis=0)
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("name", ["hands/qualisys_glove13/recording_part1.tsv",
+                                  "c3d/auto-marker-label/data/S01_Pronetokneel01_mksrem.c3d"])
+def test_every_sample_lands_in_exactly_one_output_point(name, tmp_path, han19):
+    from mocap_autolabel.core.formats.c3d import write_c3d
+
+    take = read_take(data_path(*name.split("/")))
+    layout = load_layout("glove13") if "glove13" in name else han19
+    lab = label_take(take, layout)
+    out = labeled_take(take, lab)
+    _conserved(take, out)
+    path = tmp_path / "out.c3d"
+    write_c3d(out, path)
+    back = read_take(path)
+    assert back.names[:len(layout)] == layout.names and back.valid.sum() == take.valid.sum()
+
