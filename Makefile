@@ -14,10 +14,12 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
-## demo: import the bundled raw synthetic take, label it, and rebuild it with the hand that made it
+## demo: import the bundled raw synthetic take, label it (set + trajectory voting) into a labeled C3D
+## with a report, and rebuild it with the hand that made it
 demo: venv
 	$(BIN)/python -m mocap_autolabel info samples/demo_take.c3d
-	$(BIN)/python -m mocap_autolabel label samples/demo_take.c3d --method set --layout han19 --labels out/demo_labels.npz
+	$(BIN)/python -m mocap_autolabel label samples/demo_take.c3d --layout han19 -o out/demo_labeled.c3d --report out/demo_report.json
+	$(BIN)/python -m mocap_autolabel info out/demo_labeled.c3d
 	$(BIN)/python -m mocap_autolabel import samples/demo_take.c3d --blend out/demo.blend --summary out/demo_summary.json
 	$(BIN)/python -m mocap_autolabel synth --layout han19 --frames 1200 --seed 1 -o out/demo_take.c3d --blend out/demo_truth.blend
 	@echo "demo: open out/demo.blend (the raw take) and out/demo_truth.blend (raw take + the true hand)"
@@ -36,10 +38,13 @@ bench: venv
 	$(BIN)/python benchmarks/synth_speed.py
 	$(BIN)/python benchmarks/synth_realism.py
 	$(BIN)/python benchmarks/per_frame.py
+	$(BIN)/python benchmarks/temporal.py
 
-## models: retrain every shipped model (set, perm, cnn for han19 and glove13), seeded; about 1 hour on 2 cores
+## models: retrain every shipped model (set, perm, cnn for han19 and glove13), seeded, then recalibrate
+## the segment confidences; about 1.5 hours on 2 cores
 models: venv
 	$(BIN)/python -m training --all
+	$(BIN)/python -m training.confidence
 
 ## extension: one validated Blender extension zip per platform in dist/
 extension: venv

@@ -21,11 +21,8 @@ SHIPPED_LAYOUTS = ("han19", "glove13")
 def recipe(method: str, layout: str) -> Recipe:
     """The recipe of the shipped ``method`` model for a built-in ``layout`` (or a user layout)."""
     if method == "set":
-        # Ours: every corruption, distractors in half of the frames; fingers closed side by side in
-        # 40 % of the poses and 0-8 mm marker slip, because real takes have both far more often than
-        # uniform joint angles do (tips 12-25 mm apart are the frames that confuse labelers).
-        frames = asdict(FrameConfig(together=0.4, slip=(0.0, 0.008)))
-        return Recipe(method="set", steps=10000 if layout == "han19" else 6000, lr=6e-3, frames=frames)
+        # Ours: every corruption, distractors in half of the frames.
+        return Recipe(method="set", steps=10000 if layout == "han19" else 6000, lr=6e-3)
     if method == "perm":
         return Recipe(method="perm", steps=3000, lr=3e-3, frames=HAN_PROTOCOL)
     if method == "cnn":

@@ -105,7 +105,7 @@ def _apply_constraints(scores: np.ndarray, slots: np.ndarray, mask: np.ndarray,
 def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = "vote",
                constraints: Sequence[Constraint] = (), model: str | None = None, fit: np.ndarray | None = None,
                start: np.ndarray | None = None, score: str = "likelihood", p: float = 2.0, q: float = -0.5,
-               n_best: int = 5, split_swaps: bool = True, labeler: Labeler | None = None,
+               n_best: int = 5, split_swaps: bool = True, labeler: Labeler | None = None, calibrate: bool = True,
                progress: Callable[[str], None] | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
@@ -123,6 +123,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         split_swaps: split a tracklet where its evidence flips for good (``vote`` only).
         labeler: a ready labeler to use instead of building one from ``method`` (e.g. a ``gmm``
             fitted once for a performer and used for all their takes).
+        calibrate: map raw segment confidences through the shipped calibration, where one exists.
         progress: called with a short message at each stage.
 
     Returns:
@@ -207,7 +208,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         labeling.locked = locked_at[labeling.start, labeling.slot] != EMPTY
     times["temporal"] = time.perf_counter() - t
 
-    calibration = load_calibration(method, temporal, layout.name)
+    calibration = load_calibration(method, temporal, layout.name) if calibrate else None
     if calibration is not None:
         labeling.confidence = calibration(labeling.confidence, labeling.length)
     labeling.confidence[labeling.locked] = 1.0

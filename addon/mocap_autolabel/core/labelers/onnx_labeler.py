@@ -58,7 +58,7 @@ class OnnxLabeler(Labeler):
         batch: frames per inference call (bounded memory; a few hundred keeps tensors in cache).
     """
 
-    def __init__(self, model_path: str | os.PathLike, layout: Layout | None = None, batch: int = 256):
+    def __init__(self, model_path: str | os.PathLike, layout: Layout | None = None, batch: int = 128):
         import onnxruntime as ort
 
         self.path = os.fspath(model_path)
@@ -76,6 +76,10 @@ class OnnxLabeler(Labeler):
             raise MocapInputError(self.path, "model file is corrupt or was changed (checksum differs from its card)")
         options = ort.SessionOptions()
         options.log_severity_level = 3
+        # One thread per run, and batches run side by side: these graphs are many small ops, which
+        # parallelise better across batches than inside one.
+        self.workers = max(1, min(os.cpu_count() or 1, 8))
+        options.intra_op_num_threads = 1
         try:
             self.session = ort.InferenceSession(blob, options, providers=["CPUExecutionProvider"])
         except Exception as e:  # onnxruntime raises its own types for bad graphs
@@ -85,9 +89,20 @@ class OnnxLabeler(Labeler):
     def scores(self, points: np.ndarray, mask: np.ndarray) -> np.ndarray:
         frames, k, _ = points.shape
         out = np.empty((frames, k, len(self.labels) + 1), dtype=np.float32)
-        for s in range(0, frames, self.batch):
+
+        def run(s: int) -> None:
             sl = slice(s, s + self.batch)
             feeds, context = prepare_inputs(self.card, points[sl], mask[sl])
-            outputs = self.session.run(None, feeds)
+            outputs = self.session.run(None, feeds)  # releases the GIL
             out[sl] = scores_from_outputs(self.card, outputs, context, points[sl], mask[sl])
+
+        starts = range(0, frames, self.batch)
+        if self.workers > 1 and len(starts) > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(self.workers) as pool:
+                list(pool.map(run, starts))
+        else:
+            for s in starts:
+                run(s)
         return out

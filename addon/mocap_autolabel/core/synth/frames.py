@@ -31,7 +31,6 @@ class FrameConfig:
     noise_sd: float = 0.001
     slip: tuple[float, float] = (0.0, 0.006)  # per-hand marker placement error along the skin
     rotation: bool = True  # uniform random orientation; False keeps the hand frame
-    together: float = 0.0  # share of poses with the fingers closed side by side (see sample_joint_angles)
     hands: int = 64  # distinct hands (size, side, placement) per call
 
     @property
@@ -70,7 +69,7 @@ def hand_frames(layout: Layout, n: int, rng: np.random.Generator, cfg: FrameConf
         binding, normals = layout.place(hand)
         binding = _slip(rng, binding, normals, cfg.slip)
         pose = np.zeros((len(rows), N_DOF))
-        pose[:, 6:] = sample_joint_angles(rng, len(rows), together=cfg.together)
+        pose[:, 6:] = sample_joint_angles(rng, len(rows))
         r, t = hand.skinning_transforms(pose)
         out[rows] = blend(r, t, binding)
     return out

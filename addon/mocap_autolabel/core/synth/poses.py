@@ -74,15 +74,12 @@ def couple_dip(angles: np.ndarray, rng: np.random.Generator | None = None, noise
 
 
 def sample_joint_angles(rng: np.random.Generator, n: int, canonical: float = 0.4, synergy: float = 0.3,
-                        jitter_deg: float = 8.0, together: float = 0.0) -> np.ndarray:
+                        jitter_deg: float = 8.0) -> np.ndarray:
     """``n`` joint-angle vectors ``(n, 20)`` (radians) within the limits.
 
     A mix of: a canonical pose plus Gaussian jitter (share ``canonical``); a "synergy" pose in
     which all fingers share one flexion level, as real hands mostly move (share ``synergy``);
-    and uniform samples over the limits with DIP coupled to PIP (the rest). Then, in a share
-    ``together`` of all samples, the fingers are closed side by side (abduction about -3 to +3
-    degrees), so that neighbouring fingertips touch: the hardest frames to label, and common in
-    real takes (relaxed hands, grips).
+    and uniform samples over the limits with DIP coupled to PIP (the rest).
     """
     names = list(CANONICAL_POSES)
     kind = rng.random(n)
@@ -99,12 +96,4 @@ def sample_joint_angles(rng: np.random.Generator, n: int, canonical: float = 0.4
     out[:] = uniform
     out[kind < canonical + synergy] = syn[kind < canonical + synergy]
     out[kind < canonical] = picks[kind < canonical] + jitter[kind < canonical]
-    if together <= 0:  # draw nothing: the random stream (and every seeded take) stays as it was
-        return np.clip(out, _LO, _HI)
-    closed = rng.random(n) < together
-    flex = np.array([JOINT_NAMES.index(f"{f}_{j}") for f in FINGERS for j in ("mcp_flex", "pip", "dip")])
-    shared = out[closed][:, flex].reshape(-1, len(FINGERS), 3).mean(axis=1, keepdims=True)  # one flexion, all fingers
-    spread = np.radians(10.0) * rng.standard_normal((int(closed.sum()), len(FINGERS), 3))
-    out[np.ix_(closed, flex)] = (shared + spread).reshape(-1, len(flex))
-    out[np.ix_(closed, abd)] = np.radians(rng.normal(0.0, 3.0, size=(int(closed.sum()), len(abd))))
     return np.clip(out, _LO, _HI)
