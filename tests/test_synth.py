@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 from mocap_autolabel.core.formats.c3d import read_c3d
-from mocap_autolabel.core.hand.skeleton import POSE_LIMITS
+from mocap_autolabel.core.hand.skeleton import POSE_LIMITS, HandModel
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.synth.corrupt import camera_visibility, gap_mask, merge_close
 from mocap_autolabel.core.synth.generate import (
@@ -177,3 +177,35 @@ def test_fill_short_gaps_bridges_only_short_inner_gaps():
     assert not out[5:8, 0].any() and out[12:20, 0].all()
     assert out[0:2, 1].all() and out[28:, 1].all()
     assert out.sum() == 8 + 2 + 2
+
+
+def test_corrupt_take_truth_matches_positions():
+    from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take
+
+    layout = load_layout("han19")
+    synth = synthesize(layout, 900, seed=3, config=clean_config())
+    cfg = TakeCorruption(swap_share=1.0, swap_distance=1.0, fragments_per_minute=30.0)
+    take, truth, facts = corrupt_take(synth.markers, 120.0, seed=4, cfg=cfg)
+    again, truth2, _ = corrupt_take(synth.markers, 120.0, seed=4, cfg=cfg)
+    np.testing.assert_array_equal(take.positions, again.positions)  # seeded
+    np.testing.assert_array_equal(truth, truth2)
+    assert facts["swaps"] == 1
+    f, s = np.nonzero(truth >= 0)
+    # Each truly labeled sample sits exactly on that marker (swaps included: truth follows them).
+    np.testing.assert_allclose(take.positions[f, s], synth.markers[f, truth[f, s]], atol=1e-6)
+    assert ((truth == GHOST) & take.valid).any() and ((truth >= 0) == (take.valid & (truth != GHOST))).all()
+    # Fragments: more tracklets than gaps alone would make.
+    assert len(find_tracklets(take)) > len(find_tracklets(corrupt_take(
+        synth.markers, 120.0, seed=4, cfg=TakeCorruption(swap_share=0.0, fragments_per_minute=0.0))[0]))
+
+
+def test_bone_scale_changes_proportions_only_where_asked():
+    from mocap_autolabel.core.hand.skeleton import BONE_NAMES
+
+    plain = HandModel(side="left")
+    scale = np.ones(len(BONE_NAMES))
+    scale[BONE_NAMES.index("index_mid")] = 1.1
+    varied = HandModel(side="left", bone_scale=tuple(scale))
+    ratio = varied.bone_lengths / plain.bone_lengths
+    assert ratio[BONE_NAMES.index("index_mid")] == pytest.approx(1.1)
+    assert np.delete(ratio, BONE_NAMES.index("index_mid")) == pytest.approx(1.0)

@@ -21,8 +21,11 @@ SHIPPED_LAYOUTS = ("han19", "glove13")
 def recipe(method: str, layout: str) -> Recipe:
     """The recipe of the shipped ``method`` model for a built-in ``layout`` (or a user layout)."""
     if method == "set":
-        # Ours: every corruption, distractors in half of the frames.
-        return Recipe(method="set", steps=10000 if layout == "han19" else 6000, lr=6e-3)
+        # Ours: every corruption, distractors in half of the frames; per hand, bone proportions
+        # varied by up to 10 % and flexed fingers that converge by a random amount (real hands and
+        # gloves differ from the average hand in both; the han2018 glove's do).
+        frames = asdict(FrameConfig(convergence=0.1, proportions=0.1))
+        return Recipe(method="set", steps=10000 if layout == "han19" else 6000, lr=6e-3, frames=frames)
     if method == "perm":
         return Recipe(method="perm", steps=3000, lr=3e-3, frames=HAN_PROTOCOL)
     if method == "cnn":

@@ -64,6 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
     lab.add_argument("--temporal", default="vote", choices=("vote", "viterbi", "none"),
                      help="vote: one label per tracklet segment (default); viterbi: N-best + Kalman (Alexanderson); "
                           "none: per-frame labels")
+    lab.add_argument("--vote", default="likelihood", choices=("likelihood", "power"),
+                     help="segment score for --temporal vote: summed log-probability (default) or Ghorbani's "
+                          "|T|^q (sum c^p)^(1/p)")
+    lab.add_argument("--p", type=float, default=2.0, help="p of the power vote (default 2)")
+    lab.add_argument("--q", type=float, default=-0.5, help="q of the power vote (default -0.5)")
+    lab.add_argument("--n-best", type=int, default=5, help="hypotheses per frame for --temporal viterbi (default 5)")
     lab.add_argument("--layout", default="han19", help="built-in layout name or a layout .toml (default han19)")
     lab.add_argument("--model", metavar="MODEL.onnx", help="ONNX model for set/perm/cnn (default: the shipped one)")
     lab.add_argument("--fit", metavar="LABELED",
@@ -209,6 +215,9 @@ def _label(args) -> int:
     if args.output and not args.output.lower().endswith(".c3d"):
         print(f"mocap_autolabel label: error: -o must name a .c3d file, got {args.output!r}", file=sys.stderr)
         return EXIT_USAGE
+    if not (1 <= args.n_best <= 100 and args.p > 0):
+        print("mocap_autolabel label: error: --n-best must be 1 to 100 and --p positive", file=sys.stderr)
+        return EXIT_USAGE
     if args.method == "gmm" and not args.fit:
         print("mocap_autolabel label: error: gmm needs --fit LABELED: a labeled take of the subject to fit on",
               file=sys.stderr)
@@ -218,6 +227,7 @@ def _label(args) -> int:
         take = read_take(args.file)
         labeled = _labeled_positions(read_take(args.fit), layout) if args.fit else None
         labeling = label_take(take, layout, method=args.method, temporal=args.temporal, model=args.model,
+                              score=args.vote, p=args.p, q=args.q, n_best=args.n_best,
                               fit=labeled if args.method == "gmm" else None,
                               start=labeled[0] if (labeled is not None and args.method == "nearest") else None)
         if args.output:

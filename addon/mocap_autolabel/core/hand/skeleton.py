@@ -116,11 +116,14 @@ class HandModel:
         length: hand length HL in metres (wrist crease to middle fingertip).
         breadth: hand breadth HB in metres (across the metacarpal heads).
         side: ``"left"`` or ``"right"``.
+        bone_scale: optional ``(20,)`` factors on the anatomical bone lengths: proportions that
+            differ from the average hand (training data varies them).
     """
 
     length: float = 0.190
     breadth: float = 0.085
     side: str = "right"
+    bone_scale: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.side not in ("left", "right"):
@@ -143,7 +146,7 @@ class HandModel:
         out += [f * hl for f in _LENGTHS_HL["thumb"]]
         for f in FINGERS:
             out += [x * hl for x in _LENGTHS_HL[f]]
-        return np.array(out)
+        return np.array(out) * (1.0 if self.bone_scale is None else np.asarray(self.bone_scale))
 
     @cached_property
     def bone_radii(self) -> np.ndarray:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..hand.skeleton import N_DOF, HandModel, sample_hand_size
+from ..hand.skeleton import BONE_NAMES, DOF_INDEX, FINGERS, N_DOF, POSE_LIMITS, HandModel, sample_hand_size
 from ..hand.skin import blend
 from ..layout import Layout
 from ..rotations import random_rotations
@@ -31,6 +31,11 @@ class FrameConfig:
     noise_sd: float = 0.001
     slip: tuple[float, float] = (0.0, 0.006)  # per-hand marker placement error along the skin
     rotation: bool = True  # uniform random orientation; False keeps the hand frame
+    # Per hand and finger, abduction that follows flexion (up to this many radians per radian of
+    # MCP + PIP flexion, either way): real flexed fingers converge instead of curling in their
+    # rest planes, and by how much differs between hands and gloves.
+    convergence: float = 0.0
+    proportions: float = 0.0  # per hand, every bone's length times 1 +- up to this (other gloves, other hands)
     hands: int = 64  # distinct hands (size, side, placement) per call
 
     @property
@@ -65,11 +70,21 @@ def hand_frames(layout: Layout, n: int, rng: np.random.Generator, cfg: FrameConf
         if not len(rows):
             continue
         length, breadth = sample_hand_size(rng)
-        hand = HandModel(length=length, breadth=breadth, side="left" if rng.random() < 0.5 else "right")
+        side = "left" if rng.random() < 0.5 else "right"
+        scale = None
+        if cfg.proportions > 0:
+            scale = tuple(1.0 + rng.uniform(-cfg.proportions, cfg.proportions, size=len(BONE_NAMES)))
+        hand = HandModel(length=length, breadth=breadth, side=side, bone_scale=scale)
         binding, normals = layout.place(hand)
         binding = _slip(rng, binding, normals, cfg.slip)
         pose = np.zeros((len(rows), N_DOF))
         pose[:, 6:] = sample_joint_angles(rng, len(rows))
+        if cfg.convergence > 0:
+            c = rng.uniform(-cfg.convergence, cfg.convergence, size=len(FINGERS))
+            for i, f in enumerate(FINGERS):
+                flex = pose[:, DOF_INDEX[f"{f}_mcp_flex"]] + pose[:, DOF_INDEX[f"{f}_pip"]]
+                a = DOF_INDEX[f"{f}_mcp_abd"]
+                pose[:, a] = np.clip(pose[:, a] + c[i] * flex, POSE_LIMITS[0, a], POSE_LIMITS[1, a])
         r, t = hand.skinning_transforms(pose)
         out[rows] = blend(r, t, binding)
     return out
