@@ -211,14 +211,18 @@ def test_viterbi_follows_motion_when_a_frame_is_ambiguous():
 
 def test_calibration_is_monotone_and_conservative():
     rng = np.random.default_rng(0)
-    raw = rng.random(4000)
-    correct = rng.random(4000) < raw  # truly calibrated raw scores
-    cal = fit_calibration(raw, np.full(4000, 50), correct)
+    p = rng.random(4000)
+    correct = rng.random(4000) < p  # the mean probability is itself calibrated here
+    evidence = np.column_stack([p, np.ones(4000), np.zeros(4000), np.full(4000, 50.0)])
+    cal = fit_calibration(evidence, correct)
     xs = np.linspace(0, 1, 101)
-    ys = cal(xs, np.full(101, 50))
+    grid = np.column_stack([xs, np.ones(101), np.zeros(101), np.full(101, 50.0)])
+    ys = cal(grid)
     assert (np.diff(ys) >= -1e-9).all()
     assert (ys <= xs + 0.05).all()  # never promises more than the data shows
-    assert cal(np.array([0.9]), np.array([2]))[0] == 0.0  # no short segments seen: no confidence
+    short = grid.copy()
+    short[:, 3] = 2.0
+    assert (cal(short) == 0.0).all()  # no short segments seen: no confidence
 
 
 def test_empty_and_ghost_flooded_takes(han19, synth_take):

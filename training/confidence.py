@@ -51,12 +51,12 @@ def validation_takes(layout, takes: int, frames: int) -> list:
 
 
 def segment_outcomes(labeling, take, truth) -> np.ndarray:
-    """``(S, 3)``: raw confidence, entirely right (0/1) and length of every segment."""
+    """``(S, 5)``: the evidence of every segment (4 columns), then whether it was entirely right."""
     t = np.where(truth == GHOST, NULL, truth)
     ids = labeling.segment_ids()
     ok = take.valid
     wrong = np.bincount(ids[ok], weights=(labeling.per_sample()[ok] != t[ok]), minlength=len(labeling))
-    return np.stack([labeling.confidence, wrong == 0, labeling.length], axis=1)
+    return np.column_stack([labeling.evidence, wrong == 0])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -83,13 +83,13 @@ def main(argv: list[str] | None = None) -> int:
                 seg.append(segment_outcomes(labeling, take, truth))
             seg = np.concatenate(seg)
             source = f"{len(data)} synthetic takes x {args.frames} frames, seeds {SEED0}+"
-            cal = fit_calibration(seg[:, 0], seg[:, 2], seg[:, 1].astype(bool), source)
+            right = seg[:, 4].astype(bool)
+            cal = fit_calibration(seg[:, :4], right, source)
             table[calibration_key(method, temporal, name)] = cal.as_dict()
-            conf = cal(seg[:, 0], seg[:, 2])
-            hi = conf >= 0.95
-            print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * seg[:, 1].mean():.2f} % right; "
-                  f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * seg[hi, 1].mean():.3f} % right",
-                  file=sys.stderr)
+            hi = cal(seg[:, :4]) >= 0.95
+            print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
+                  f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "
+                  "right", file=sys.stderr)
     with atomic_output(args.out) as tmp, open(tmp, "w", encoding="utf-8") as fh:
         json.dump(table, fh, indent=1, sort_keys=True)
     print(f"wrote {args.out}", file=sys.stderr)

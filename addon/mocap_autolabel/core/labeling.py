@@ -48,6 +48,8 @@ class Labeling:
             where a calibration exists for the method; see ``core/temporal/confidence.py``).
         locked: bool ``(n,)``: decided by a user constraint.
         info: how it was made (method, temporal mode, timings...), for reports.
+        evidence: float32 ``(n, 4)`` or None: what the confidence is computed from (see
+            ``core/temporal/confidence.py: segment_evidence``).
     """
 
     names: list[str]
@@ -60,6 +62,7 @@ class Labeling:
     confidence: np.ndarray
     locked: np.ndarray
     info: dict
+    evidence: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.slot.shape[0])

@@ -17,7 +17,7 @@ from .labelers.assign import assign, row_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, segments_from_runs
 from .layout import Layout
 from .take import Take
-from .temporal.confidence import load_calibration
+from .temporal.confidence import load_calibration, segment_evidence
 from .temporal.voting import (
     LOG_FLOOR,
     Samples,
@@ -179,25 +179,15 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         segments, label, seg, facts = vote(samples, segments, locked_at, score, p, q, split_swaps)
         info.update(facts)
         first_locked = locked_at[segments.start, segments.slot]
-        count = np.bincount(seg[seg >= 0], minlength=len(segments))
-        prob = np.exp(samples.logp.astype(np.float64))
-        m = len(layout)
-        col = np.where(label == NULL, m, label)
-        ok = seg >= 0
-        chosen = np.bincount(seg[ok], weights=prob[np.flatnonzero(ok), col[seg[ok]]], minlength=len(segments))
-        raw = (chosen / np.maximum(count, 1)).astype(np.float32)
         labeling = Labeling(names=layout.names, n_frames=take.n_frames, n_points=take.n_points,
                             slot=segments.slot, start=segments.start, stop=segments.stop,
-                            label=label.astype(np.int16), confidence=raw,
+                            label=label.astype(np.int16), confidence=np.zeros(len(segments), dtype=np.float32),
                             locked=first_locked != EMPTY, info=info)
     else:
         if temporal == "viterbi":
             from .temporal.viterbi import viterbi_labels
 
             frame_labels = viterbi_labels(scores, mask, points, take.rate, n_best=n_best)
-            prob = row_probabilities(scores)
-            col = np.where(frame_labels == NULL, scores.shape[2] - 1, frame_labels)
-            frame_conf = np.take_along_axis(prob, col[..., None].astype(np.int64), axis=2)[..., 0]
         per = np.full(valid.shape, NULL, dtype=np.int16)
         conf = np.zeros(valid.shape, dtype=np.float32)
         per[f_idx, slots[f_idx, k_idx]] = frame_labels[f_idx, k_idx]
@@ -208,9 +198,11 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         labeling.locked = locked_at[labeling.start, labeling.slot] != EMPTY
     times["temporal"] = time.perf_counter() - t
 
+    labeling.evidence = segment_evidence(labeling, samples)
+    labeling.confidence = labeling.evidence[:, 0].copy()
     calibration = load_calibration(method, temporal, layout.name) if calibrate else None
     if calibration is not None:
-        labeling.confidence = calibration(labeling.confidence, labeling.length)
+        labeling.confidence = calibration(labeling.evidence)
     labeling.confidence[labeling.locked] = 1.0
     info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
     times["total"] = time.perf_counter() - t0

@@ -1,10 +1,13 @@
 """Calibrated segment confidence: the chance that a segment's decision is right.
 
-The raw score of a segment is the mean per-frame probability of its chosen label. A calibration
-maps it, per segment-length band, to the share of validation segments that were entirely right
-(isotonic regression, then each block lowered to the lower end of its 95 % Wilson interval, so
-that thin evidence never earns a high confidence). Calibrations are built from synthetic
-validation takes (``python -m training.confidence``) and shipped in ``models/confidence.json``.
+Each segment's evidence (:func:`segment_evidence`) is the mean per-frame probability of its
+label, the share of its frames whose own best labeling agrees, the mean log-probability margin
+of its label over the next best, and its length. A calibration combines them by a logistic
+regression, then maps that score, per segment-length band, to the share of validation
+segments that were entirely right (isotonic regression, each block lowered to the lower end of
+its 95 % Wilson interval, so that thin evidence never earns a high confidence). Calibrations are
+built from synthetic validation takes (``python -m training.confidence``) and shipped in
+``models/confidence.json``. Without one, the confidence is the mean probability alone.
 """
 
 from __future__ import annotations
@@ -19,17 +22,58 @@ import numpy as np
 LENGTH_EDGES = (5, 30)
 
 
+EVIDENCE = ("mean probability", "agreement", "margin", "length")
+
+
+def segment_evidence(labeling, samples) -> np.ndarray:
+    """float32 ``(S, 4)``: per segment, the mean probability of its label over its scored samples,
+    the share of them whose per-frame labeling agrees, the mean log-probability margin of its
+    label over the best other column (clipped to +-10), and its length in frames. Segments with
+    no scored sample get zeros (and their length)."""
+    n = len(labeling)
+    seg = labeling.segment_ids()[samples.frame, samples.slot]
+    ok = seg >= 0
+    seg, rows = seg[ok], np.flatnonzero(ok)
+    m = samples.logp.shape[1] - 1
+    label = labeling.label[seg].astype(np.int64)
+    col = np.where(label < 0, m, label)
+    lp = samples.logp[rows].astype(np.float64)
+    chosen = lp[np.arange(len(rows)), col]
+    others = lp.copy()
+    others[np.arange(len(rows)), col] = -np.inf
+    margin = np.clip(chosen - others.max(axis=1), -10.0, 10.0)
+    agree = samples.label[rows] == label
+    count = np.maximum(np.bincount(seg, minlength=n), 1)
+    out = np.zeros((n, 4), dtype=np.float32)
+    out[:, 0] = np.bincount(seg, weights=np.exp(chosen), minlength=n) / count
+    out[:, 1] = np.bincount(seg, weights=agree, minlength=n) / count
+    out[:, 2] = np.bincount(seg, weights=margin, minlength=n) / count
+    out[:, 3] = labeling.length
+    return out
+
+
+def _features(evidence: np.ndarray) -> np.ndarray:
+    e = np.asarray(evidence, dtype=np.float64)
+    return np.column_stack([e[:, 0], e[:, 1], e[:, 2] / 10.0, np.log1p(e[:, 3]) / 5.0, np.ones(len(e))])
+
+
 @dataclass
 class Calibration:
-    """Per length band, a monotone map from raw score to confidence (knots ``x`` -> ``y``)."""
+    """Logistic weights over the evidence, then per length band a monotone map from that score
+    to confidence (knots ``x`` -> ``y``)."""
 
+    weights: list[float]
     x: list[list[float]]
     y: list[list[float]]
     segments: int = 0
     source: str = ""
 
-    def __call__(self, raw: np.ndarray, length: np.ndarray) -> np.ndarray:
-        band = np.searchsorted(LENGTH_EDGES, length, side="right")
+    def score(self, evidence: np.ndarray) -> np.ndarray:
+        return 1.0 / (1.0 + np.exp(-_features(evidence) @ np.asarray(self.weights)))
+
+    def __call__(self, evidence: np.ndarray) -> np.ndarray:
+        raw = self.score(evidence)
+        band = np.searchsorted(LENGTH_EDGES, evidence[:, 3], side="right")
         out = np.empty(len(raw), dtype=np.float32)
         for b in range(len(LENGTH_EDGES) + 1):
             sel = band == b
@@ -38,8 +82,8 @@ class Calibration:
         return out
 
     def as_dict(self) -> dict:
-        return {"length_edges": list(LENGTH_EDGES), "x": self.x, "y": self.y, "segments": self.segments,
-                "source": self.source}
+        return {"length_edges": list(LENGTH_EDGES), "evidence": list(EVIDENCE), "weights": self.weights,
+                "x": self.x, "y": self.y, "segments": self.segments, "source": self.source}
 
 
 def _wilson_lower(correct: np.ndarray, n: np.ndarray, z: float = 1.96) -> np.ndarray:
@@ -49,11 +93,28 @@ def _wilson_lower(correct: np.ndarray, n: np.ndarray, z: float = 1.96) -> np.nda
     return (centre - half) / (1 + z * z / n)
 
 
-def fit_calibration(raw: np.ndarray, length: np.ndarray, correct: np.ndarray, source: str = "") -> Calibration:
-    """Fit the maps from validation segments: raw scores ``(n,)``, lengths ``(n,)`` and whether each
-    segment was entirely right ``(n,)``."""
+def _fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-3) -> np.ndarray:
+    from scipy.optimize import minimize
+
+    def loss(w):
+        z = x @ w
+        p = 1.0 / (1.0 + np.exp(-z))
+        nll = np.mean(np.logaddexp(0.0, z) - y * z) + l2 * (w[:-1] @ w[:-1])
+        grad = x.T @ (p - y) / len(y) + 2 * l2 * np.concatenate([w[:-1], [0.0]])
+        return nll, grad
+
+    return minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
+
+
+def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "") -> Calibration:
+    """Fit the maps from validation segments: their evidence ``(n, 4)`` (see :func:`segment_evidence`)
+    and whether each segment was entirely right ``(n,)``."""
     from scipy.optimize import isotonic_regression
 
+    correct = np.asarray(correct, dtype=bool)
+    weights = _fit_logistic(_features(evidence), correct.astype(float))
+    raw = 1.0 / (1.0 + np.exp(-_features(evidence) @ weights))
+    length = evidence[:, 3]
     band = np.searchsorted(LENGTH_EDGES, length, side="right")
     xs, ys = [], []
     for b in range(len(LENGTH_EDGES) + 1):
@@ -77,7 +138,7 @@ def fit_calibration(raw: np.ndarray, length: np.ndarray, correct: np.ndarray, so
         x = np.maximum.accumulate(x)
         xs.append([round(float(v), 6) for v in x])
         ys.append([round(float(v), 6) for v in y])
-    return Calibration(xs, ys, int(len(raw)), source)
+    return Calibration([round(float(w), 6) for w in weights], xs, ys, int(len(raw)), source)
 
 
 CALIBRATIONS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
@@ -96,6 +157,6 @@ def load_calibration(method: str, temporal: str, layout: str, path: str = CALIBR
     except (OSError, ValueError):
         return None
     entry = table.get(calibration_key(method, temporal, layout))
-    if entry is None or tuple(entry.get("length_edges", ())) != LENGTH_EDGES:
+    if entry is None or tuple(entry.get("length_edges", ())) != LENGTH_EDGES or "weights" not in entry:
         return None
-    return Calibration(entry["x"], entry["y"], entry.get("segments", 0), entry.get("source", ""))
+    return Calibration(entry["weights"], entry["x"], entry["y"], entry.get("segments", 0), entry.get("source", ""))
