@@ -104,8 +104,7 @@ def test_find_swaps_cuts_where_the_evidence_flips():
 def test_segments_from_runs_round_trip():
     labels = np.array([[0, 1], [0, 1], [2, NULL], [2, NULL]])
     valid = np.array([[True, True], [True, False], [True, True], [True, True]])
-    conf = np.full(labels.shape, 0.5, dtype=np.float32)
-    lab = segments_from_runs(["a", "b", "c"], labels, conf, valid, {})
+    lab = segments_from_runs(["a", "b", "c"], labels, valid, {})
     assert list(zip(lab.slot, lab.start, lab.stop, lab.label)) == [(0, 0, 2, 0), (0, 2, 4, 2), (1, 0, 1, 1),
                                                                    (1, 2, 4, NULL)]
     per = lab.per_sample()
@@ -223,6 +222,18 @@ def test_calibration_is_monotone_and_conservative():
     short = grid.copy()
     short[:, 3] = 2.0
     assert (cal(short) == 0.0).all()  # no short segments seen: no confidence
+    assert ys.max() < 0.95  # nowhere were segments right 99.9 % of the time
+
+
+def test_confidence_of_095_is_earned_by_a_pure_group():
+    rng = np.random.default_rng(1)
+    p = np.concatenate([np.full(3000, 0.99), rng.uniform(0, 0.9, 3000)])
+    correct = np.concatenate([np.ones(3000, bool), rng.random(3000) < p[3000:]])
+    evidence = np.column_stack([p, np.ones(6000), np.zeros(6000), np.full(6000, 50.0)])
+    cal = fit_calibration(evidence, correct)
+    sure = cal(evidence) >= 0.95
+    assert sure[:3000].all() and sure[3000:].mean() < 0.01  # the pure group, and hardly anything else
+    assert correct[sure].mean() >= 0.999
 
 
 def test_empty_and_ghost_flooded_takes(han19, synth_take):

@@ -145,13 +145,13 @@ def labeled_take(take: Take, labeling: Labeling) -> Take:
                 source=take.source, vendor=take.vendor)
 
 
-def segments_from_runs(names: list[str], labels: np.ndarray, confidence: np.ndarray, valid: np.ndarray,
-                       info: dict, split: np.ndarray | None = None) -> Labeling:
-    """A Labeling from per-sample labels ``(F, P)``: one segment per run of one label in one slot.
+def segments_from_runs(names: list[str], labels: np.ndarray, valid: np.ndarray, info: dict,
+                       split: np.ndarray | None = None) -> Labeling:
+    """A Labeling from per-sample labels ``(F, P)``: one segment per run of one label in one slot
+    (confidences 0, for the caller to fill).
 
     Args:
         labels: int ``(F, P)`` label per sample (ignored where not ``valid``).
-        confidence: float ``(F, P)``; a segment gets the mean of its samples.
         valid: bool ``(F, P)``.
         split: optional bool ``(F, P)``: also start a new segment where True (a tracklet start).
     """
@@ -165,12 +165,9 @@ def segments_from_runs(names: list[str], labels: np.ndarray, confidence: np.ndar
     # Row-major order over (slot, frame) gives segments ordered by (slot, start).
     slot, start = np.nonzero(begin.T)
     seg = np.cumsum(begin.T.ravel()) - 1
-    inside = valid.T.ravel()
-    seg_of = seg[inside]
     n = len(slot)
-    length = np.bincount(seg_of, minlength=n)
-    conf = np.bincount(seg_of, weights=confidence.T.ravel()[inside], minlength=n) / np.maximum(length, 1)
+    length = np.bincount(seg[valid.T.ravel()], minlength=n)
     return Labeling(names=list(names), n_frames=frames, n_points=points, slot=slot.astype(np.int64),
                     start=start.astype(np.int64), stop=(start + length).astype(np.int64),
-                    label=lab.T[slot, start].astype(np.int16), confidence=conf.astype(np.float32),
+                    label=lab.T[slot, start].astype(np.int16), confidence=np.zeros(n, dtype=np.float32),
                     locked=np.zeros(n, dtype=bool), info=info)

@@ -75,7 +75,6 @@ def _labeler(method: str, layout: Layout, model, fit: np.ndarray | None, start: 
             start = np.full((len(layout), 3), np.nan)
             ok = labels[0] >= 0
             start[labels[0][ok]] = batch.points[first][ok]
-            # The tracker starts at frame 0; earlier empty frames carry no information.
         return make_labeler("nearest", layout, start=start)
     return make_labeler(method, layout, model)
 
@@ -189,17 +188,15 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
 
             frame_labels = viterbi_labels(scores, mask, points, take.rate, n_best=n_best)
         per = np.full(valid.shape, NULL, dtype=np.int16)
-        conf = np.zeros(valid.shape, dtype=np.float32)
         per[f_idx, slots[f_idx, k_idx]] = frame_labels[f_idx, k_idx]
-        conf[f_idx, slots[f_idx, k_idx]] = frame_conf[f_idx, k_idx]
         split = np.zeros(valid.shape, dtype=bool)
         split[segments.start, segments.slot] = True
-        labeling = segments_from_runs(layout.names, per, conf, valid, info, split=split)
+        labeling = segments_from_runs(layout.names, per, valid, info, split=split)
         labeling.locked = locked_at[labeling.start, labeling.slot] != EMPTY
     times["temporal"] = time.perf_counter() - t
 
     labeling.evidence = segment_evidence(labeling, samples)
-    labeling.confidence = labeling.evidence[:, 0].copy()
+    labeling.confidence = labeling.evidence[:, 0].copy()  # the mean probability, until calibrated
     calibration = load_calibration(method, temporal, layout.name) if calibrate else None
     if calibration is not None:
         labeling.confidence = calibration(labeling.evidence)

@@ -5,7 +5,10 @@ label, the share of its frames whose own best labeling agrees, the mean log-prob
 of its label over the next best, and its length. A calibration combines them by a logistic
 regression, then maps that score, per segment-length band, to the share of validation
 segments that were entirely right (isotonic regression, each block lowered to the lower end of
-its 95 % Wilson interval, so that thin evidence never earns a high confidence). Calibrations are
+its 95 % Wilson interval, so that thin evidence never earns a high confidence). On top, the
+score from which on validation segments were right at least 99.9 % of the time (one-sided
+Wilson bound) maps to at least 0.95 and every lower score to less: "0.95 or more" is a promise
+a reviewer can skip on. Calibrations are
 built from synthetic validation takes (``python -m training.confidence``) and shipped in
 ``models/confidence.json``. Without one, the confidence is the mean probability alone.
 """
@@ -20,6 +23,10 @@ import numpy as np
 
 #: Segment-length bands (frames): short runs are judged apart from long tracklets.
 LENGTH_EDGES = (5, 30)
+#: A confidence of at least SURE promises that such segments were right at least SURE_ACCURACY of
+#: the time on validation data (a lower confidence bound, not the point estimate): reviewers may
+#: skip them. Below SURE the confidence is the calibrated chance of being right.
+SURE, SURE_ACCURACY = 0.95, 0.999
 
 
 EVIDENCE = ("mean probability", "agreement", "margin", "length")
@@ -65,6 +72,7 @@ class Calibration:
     weights: list[float]
     x: list[list[float]]
     y: list[list[float]]
+    sure: list[float]  # per band, the score from which confidence is at least SURE (2.0: never)
     segments: int = 0
     source: str = ""
 
@@ -78,12 +86,14 @@ class Calibration:
         for b in range(len(LENGTH_EDGES) + 1):
             sel = band == b
             if sel.any():
-                out[sel] = np.interp(raw[sel], self.x[b], self.y[b])
+                y = np.interp(raw[sel], self.x[b], self.y[b])
+                out[sel] = np.where(raw[sel] >= self.sure[b], np.maximum(y, SURE), np.minimum(y, SURE - 1e-3))
         return out
 
     def as_dict(self) -> dict:
         return {"length_edges": list(LENGTH_EDGES), "evidence": list(EVIDENCE), "weights": self.weights,
-                "x": self.x, "y": self.y, "segments": self.segments, "source": self.source}
+                "x": self.x, "y": self.y, "sure": self.sure, "sure_accuracy": SURE_ACCURACY,
+                "segments": self.segments, "source": self.source}
 
 
 def _wilson_lower(correct: np.ndarray, n: np.ndarray, z: float = 1.96) -> np.ndarray:
@@ -116,12 +126,13 @@ def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "")
     raw = 1.0 / (1.0 + np.exp(-_features(evidence) @ weights))
     length = evidence[:, 3]
     band = np.searchsorted(LENGTH_EDGES, length, side="right")
-    xs, ys = [], []
+    xs, ys, sure = [], [], []
     for b in range(len(LENGTH_EDGES) + 1):
         sel = band == b
         if sel.sum() < 10:  # too little evidence: no confidence at all in this band
             xs.append([0.0, 1.0])
             ys.append([0.0, 0.0])
+            sure.append(2.0)
             continue
         order = np.argsort(raw[sel], kind="stable")
         r, c = raw[sel][order], correct[sel][order].astype(float)
@@ -138,7 +149,12 @@ def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "")
         x = np.maximum.accumulate(x)
         xs.append([round(float(v), 6) for v in x])
         ys.append([round(float(v), 6) for v in y])
-    return Calibration([round(float(w), 6) for w in weights], xs, ys, int(len(raw)), source)
+        # The lowest score whose segments at or above it were right often enough (one-sided bound).
+        right = np.cumsum(c[::-1])
+        seen = np.arange(1, len(c) + 1)
+        ok = np.flatnonzero(_wilson_lower(right, seen, z=1.0) >= SURE_ACCURACY)
+        sure.append(float(r[::-1][ok[-1]]) if len(ok) else 2.0)
+    return Calibration([round(float(w), 6) for w in weights], xs, ys, sure, int(len(raw)), source)
 
 
 CALIBRATIONS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
@@ -157,6 +173,7 @@ def load_calibration(method: str, temporal: str, layout: str, path: str = CALIBR
     except (OSError, ValueError):
         return None
     entry = table.get(calibration_key(method, temporal, layout))
-    if entry is None or tuple(entry.get("length_edges", ())) != LENGTH_EDGES or "weights" not in entry:
+    if entry is None or tuple(entry.get("length_edges", ())) != LENGTH_EDGES or "sure" not in entry:
         return None
-    return Calibration(entry["weights"], entry["x"], entry["y"], entry.get("segments", 0), entry.get("source", ""))
+    return Calibration(entry["weights"], entry["x"], entry["y"], entry["sure"], entry.get("segments", 0),
+                       entry.get("source", ""))

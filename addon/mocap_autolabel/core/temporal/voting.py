@@ -146,10 +146,6 @@ def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: s
         w = np.zeros((n_segments, m1))
         np.add.at(w, seg, samples.logp[ok].astype(np.float64))
         return w, count
-    if score == "soft":
-        w = np.zeros((n_segments, m1))
-        np.add.at(w, seg, np.exp(samples.logp[ok].astype(np.float64)))
-        return w, count
     if score == "power":
         col = np.where(samples.label[ok] >= 0, samples.label[ok], m1 - 1).astype(np.int64)
         acc = np.zeros((n_segments, m1))
