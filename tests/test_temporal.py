@@ -232,7 +232,7 @@ def test_confidence_of_095_is_earned_by_a_pure_group():
     evidence = np.column_stack([p, np.ones(6000), np.zeros(6000), np.full(6000, 50.0)])
     cal = fit_calibration(evidence, correct)
     sure = cal(evidence) >= 0.95
-    assert sure[:3000].all() and sure[3000:].mean() < 0.01  # the pure group, and hardly anything else
+    assert sure[:3000].all() and sure[3000:].mean() < 0.02  # the pure group, and hardly anything else
     assert correct[sure].mean() >= 0.999
 
 
