@@ -149,11 +149,14 @@ def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "")
         x = np.maximum.accumulate(x)
         xs.append([round(float(v), 6) for v in x])
         ys.append([round(float(v), 6) for v in y])
-        # The lowest score whose segments at or above it were right often enough (one-sided bound).
-        right = np.cumsum(c[::-1])
-        seen = np.arange(1, len(c) + 1)
-        ok = np.flatnonzero(_wilson_lower(right, seen, z=1.0) >= SURE_ACCURACY)
-        sure.append(float(r[::-1][ok[-1]]) if len(ok) else 2.0)
+        sure.append(0.0)
+    # The lowest score from which segments were right often enough (one-sided bound), over all
+    # bands together: the score includes length, and the promise is about all segments.
+    order = np.argsort(-raw, kind="stable")
+    right = np.cumsum(correct[order])
+    ok = np.flatnonzero(_wilson_lower(right, np.arange(1, len(raw) + 1), z=1.0) >= SURE_ACCURACY)
+    tau = float(raw[order][ok[-1]]) if len(ok) else 2.0
+    sure = [2.0 if s == 2.0 else tau for s in sure]
     return Calibration([round(float(w), 6) for w in weights], xs, ys, sure, int(len(raw)), source)
 
 
