@@ -64,6 +64,11 @@ def _features(evidence: np.ndarray) -> np.ndarray:
     return np.column_stack([e[:, 0], e[:, 1], e[:, 2] / 10.0, np.log1p(e[:, 3]) / 5.0, np.ones(len(e))])
 
 
+def _score(evidence: np.ndarray, weights) -> np.ndarray:
+    """The logistic score of each segment's evidence, in (0, 1)."""
+    return 1.0 / (1.0 + np.exp(-_features(evidence) @ np.asarray(weights)))
+
+
 @dataclass
 class Calibration:
     """Logistic weights over the evidence, then per length band a monotone map from that score
@@ -76,11 +81,8 @@ class Calibration:
     segments: int = 0
     source: str = ""
 
-    def score(self, evidence: np.ndarray) -> np.ndarray:
-        return 1.0 / (1.0 + np.exp(-_features(evidence) @ np.asarray(self.weights)))
-
     def __call__(self, evidence: np.ndarray) -> np.ndarray:
-        raw = self.score(evidence)
+        raw = _score(evidence, self.weights)
         band = np.searchsorted(LENGTH_EDGES, evidence[:, 3], side="right")
         out = np.empty(len(raw), dtype=np.float32)
         for b in range(len(LENGTH_EDGES) + 1):
@@ -123,7 +125,7 @@ def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "")
 
     correct = np.asarray(correct, dtype=bool)
     weights = _fit_logistic(_features(evidence), correct.astype(float))
-    raw = 1.0 / (1.0 + np.exp(-_features(evidence) @ weights))
+    raw = _score(evidence, weights)
     length = evidence[:, 3]
     band = np.searchsorted(LENGTH_EDGES, length, side="right")
     xs, ys, sure = [], [], []
