@@ -30,7 +30,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from datasets import HAN2018, glove13_take, han2018_sequences  # noqa: E402
 from mocap_autolabel.core.labelers.gmm import GmmLabeler  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
-from mocap_autolabel.core.metrics import score_labeling  # noqa: E402
+from mocap_autolabel.core.metrics import score_labeling, segments_right  # noqa: E402
 from mocap_autolabel.core.pipeline import label_take  # noqa: E402
 from mocap_autolabel.core.synth.generate import GHOST, _pack, corrupt_take, save_synth, synthesize  # noqa: E402
 from mocap_autolabel.core.take import Take  # noqa: E402
@@ -108,11 +108,8 @@ def run(cases: list[Case], layout, method: str, temporal: str, score: str) -> tu
         for key in COUNTS:
             total[key] += s[key]
         # Per segment: its confidence and whether every sample of it is right.
-        truth = np.where(c.truth == GHOST, -1, c.truth)
-        ids = labeling.segment_ids()
-        ok = c.take.valid
-        wrong = np.bincount(ids[ok], weights=(labeling.per_sample()[ok] != truth[ok]), minlength=len(labeling))
-        segments.append(np.stack([labeling.confidence, wrong == 0, labeling.length], axis=1))
+        right = segments_right(labeling, c.truth, c.take.valid)
+        segments.append(np.stack([labeling.confidence, right, labeling.length], axis=1))
     return total, sum(c.take.n_frames for c in cases) / max(seconds, 1e-9), segments
 
 

@@ -10,6 +10,7 @@ from conftest import data_path
 from mocap_autolabel.core.errors import MocapInputError
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint, labeled_take, segments_from_runs
 from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.metrics import segments_right
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
@@ -109,6 +110,8 @@ def test_segments_from_runs_round_trip():
                                                                    (1, 2, 4, NULL)]
     per = lab.per_sample()
     assert (per[valid] == labels[valid]).all() and (per[~valid] == EMPTY).all()
+    truth = np.array([[0, 1], [0, 1], [2, GHOST], [1, GHOST]])  # frame 3 of slot 0 is really label 1
+    assert list(segments_right(lab, truth, valid)) == [True, False, True, True]
 
 
 @pytest.fixture(scope="module")

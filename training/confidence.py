@@ -13,19 +13,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 import numpy as np
 from mocap_autolabel.core.atomic import atomic_output
 from mocap_autolabel.core.labelers.gmm import GmmLabeler
-from mocap_autolabel.core.labeling import NULL
+from mocap_autolabel.core.labelers.onnx_labeler import MODELS_DIR
 from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.metrics import segments_right
 from mocap_autolabel.core.pipeline import label_take
-from mocap_autolabel.core.synth.generate import GHOST, corrupt_take, synthesize
+from mocap_autolabel.core.synth.generate import corrupt_take, synthesize
 from mocap_autolabel.core.take import Take
 from mocap_autolabel.core.temporal.confidence import CALIBRATIONS, calibration_key, fit_calibration
-
-from .recipes import SHIPPED_LAYOUTS
 
 #: Seeds of the calibration takes: apart from the benchmarks' and the tests' seeds.
 SEED0 = 50_000
@@ -52,11 +52,13 @@ def validation_takes(layout, takes: int, frames: int) -> list:
 
 def segment_outcomes(labeling, take, truth) -> np.ndarray:
     """``(S, 5)``: the evidence of every segment (4 columns), then whether it was entirely right."""
-    t = np.where(truth == GHOST, NULL, truth)
-    ids = labeling.segment_ids()
-    ok = take.valid
-    wrong = np.bincount(ids[ok], weights=(labeling.per_sample()[ok] != t[ok]), minlength=len(labeling))
-    return np.column_stack([labeling.evidence, wrong == 0])
+    return np.column_stack([labeling.evidence, segments_right(labeling, truth, take.valid)])
+
+
+def shipped_layouts() -> list[str]:
+    """The layouts that have a shipped ``set`` model (the calibrations follow the models)."""
+    return sorted(f[len("set_"):-len(".onnx")] for f in os.listdir(MODELS_DIR)
+                  if f.startswith("set_") and f.endswith(".onnx"))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -67,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=CALIBRATIONS)
     args = ap.parse_args(argv)
     table = {}
-    for name in SHIPPED_LAYOUTS:
+    for name in shipped_layouts():
         layout = load_layout(name)
         data = validation_takes(layout, args.takes, args.frames)
         combos = [tuple(c.split("/")) for c in args.only] if args.only else COMBOS

@@ -106,3 +106,15 @@ def data_set_stats(present: np.ndarray) -> dict:
             "mean_gap_frames": float(gap_len.mean()) if len(gap_len) else 0.0,
             "tracklets": int(len(runs[0])),
             "mean_tracklet_frames": float(np.mean(runs[2] - runs[1])) if len(runs[0]) else 0.0}
+
+
+def segments_right(labeling, truth: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """bool ``(S,)``: whether every sample of each segment of a Labeling carries its true label.
+
+    ``truth`` int ``(F, P)`` per sample: the label index, or a negative value for a ghost (which
+    a null decision gets right); ``valid`` bool ``(F, P)``.
+    """
+    t = np.where(truth < 0, -1, truth)
+    ids = labeling.segment_ids()
+    wrong = np.bincount(ids[valid], weights=labeling.per_sample()[valid] != t[valid], minlength=len(labeling))
+    return wrong == 0
