@@ -265,6 +265,74 @@ class HandModel:
         return r, t
 
     @cached_property
+    def dof_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every elementary rotation of the skeleton, in :meth:`forward_axes` order.
+
+        Returns ``cols (D,)`` the column of the extended angle array it turns with (>= 26 for the
+        coupled CMC cupping), ``bones (D,)`` the bone it rotates (with all its descendants), and
+        ``signs (D,)``.
+        """
+        rows = [(col, b, sign) for b, joint in enumerate(self._joints) for col, _, sign in joint.dofs]
+        cols, bones, signs = (np.array(x) for x in zip(*rows))
+        return cols, bones, signs.astype(float)
+
+    def forward_axes(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Forward kinematics in the world plus every elementary rotation's axis and pivot.
+
+        Turning the angle of row ``d`` of :attr:`dof_table` by ``dθ`` moves a point ``p`` carried by
+        the bone ``bones[d]`` (or a descendant) by ``signs[d] * dθ * axes[d] x (p - pivots[d])``.
+        That is the whole analytic Jacobian of the skeleton.
+
+        Returns:
+            rotations ``(F, 20, 3, 3)``, positions ``(F, 20, 3)`` (as :meth:`forward`), axes
+            ``(F, D, 3)`` unit vectors and pivots ``(F, D, 3)`` metres, all in the world.
+        """
+        pose = np.atleast_2d(np.asarray(pose, dtype=float))
+        n = pose.shape[0]
+        ext = self._extended_angles(pose)
+        unit = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
+        turn = {"x": rot_x, "y": rot_y, "z": rot_z}
+        rots: list[np.ndarray] = []
+        locs: list[np.ndarray] = []
+        axes: list[np.ndarray] = []
+        pivots: list[np.ndarray] = []
+        for b, joint in enumerate(self._joints):
+            p = PARENTS[b]
+            if p < 0:
+                rots.append(np.broadcast_to(joint.pre, (n, 3, 3)))
+                locs.append(np.broadcast_to(joint.offset, (n, 3)))
+                continue
+            origin = locs[p] + rots[p] @ joint.offset
+            frame = rots[p] @ joint.pre
+            for col, axis, sign in joint.dofs:
+                axes.append(frame @ unit[axis])
+                pivots.append(origin)
+                frame = frame @ turn[axis](sign * ext[:, col])
+            rots.append(frame @ joint.post)
+            locs.append(origin)
+        r, t = np.stack(rots, axis=1), np.stack(locs, axis=1)
+        ax, pv = np.stack(axes, axis=1), np.stack(pivots, axis=1)
+        if self.side == "right":
+            # A reflection M turns a rotation about a by θ into one about -M a by θ.
+            r = r * _MIRROR_SIGNS
+            t, pv = t * MIRROR.diagonal(), pv * MIRROR.diagonal()
+            ax = -ax * MIRROR.diagonal()
+        g = rotvec_to_matrix(pose[:, 0:3])
+        gt = np.swapaxes(g, 1, 2)
+        return g[:, None] @ r, t @ gt + pose[:, None, 3:6], ax @ gt, pv @ gt + pose[:, None, 3:6]
+
+    def coupling(self, pose: np.ndarray) -> np.ndarray:
+        """``(F, 30 - 26)``: derivative of each coupled cupping angle by its finger's MCP flexion."""
+        pose = np.atleast_2d(pose)
+        out = np.zeros((pose.shape[0], len(FINGERS)))
+        for i, f in enumerate(FINGERS):
+            if f in _CUPPING:
+                frac, limit = _CUPPING[f]
+                v = frac * pose[:, DOF_INDEX[f"{f}_mcp_flex"]]
+                out[:, i] = np.where((v > 0) & (v < np.radians(limit)), frac, 0.0)
+        return out
+
+    @cached_property
     def rest(self) -> tuple[np.ndarray, np.ndarray]:
         """Rest frames in the hand frame: rotations ``(20, 3, 3)`` and positions ``(20, 3)``."""
         r, p = self.forward(np.zeros(N_DOF), world=False)
