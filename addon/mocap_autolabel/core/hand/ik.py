@@ -84,8 +84,10 @@ class Fit:
     @property
     def rms(self) -> np.ndarray:
         """``(F,)`` root mean square marker residual per frame, metres (NaN where unsolved)."""
-        with np.errstate(invalid="ignore"):
-            return np.sqrt(np.nanmean(np.where(self.solved[:, None], self.residuals ** 2, np.nan), axis=1))
+        sq = np.where(self.solved[:, None] & np.isfinite(self.residuals), self.residuals ** 2, 0.0)
+        count = (self.solved[:, None] & np.isfinite(self.residuals)).sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(count > 0, np.sqrt(sq.sum(axis=1) / count), np.nan)
 
     def overall_rms(self) -> float:
         """RMS over every observed marker of every solved frame, metres."""

@@ -1,0 +1,143 @@
+"""Hand solve in the core: IK Jacobian and fit, smoothing, calibration and its file."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import data_path
+from mocap_autolabel.core.errors import MocapInputError
+from mocap_autolabel.core.hand import HandModel, blend
+from mocap_autolabel.core.hand.calibrate import Calibration, _offset, calibrate, detect_side
+from mocap_autolabel.core.hand.ik import MIN_MARKERS, HandSolver, smooth_poses
+from mocap_autolabel.core.hand.skeleton import POSE_LIMITS
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.synth.motion import generate_motion
+
+HAN19 = load_layout("han19")
+FLAT = np.radians([0, 20, 0, 0] + [0] * 16)
+
+
+def _take(hand: HandModel, frames: int, seed: int, noise: float = 0.0, offsets=None, flat: int = 0):
+    """Markers of ``hand`` wearing han19 over a random motion: (poses, observed)."""
+    rng = np.random.default_rng(seed)
+    poses = generate_motion(rng, frames, 120.0)
+    poses[:flat, 6:] = FLAT
+    binding = HAN19.place(hand)[0] if offsets is None else _offset(HAN19.place(hand)[0], offsets)
+    markers = blend(*hand.skinning_transforms(poses), binding)
+    return poses, markers + rng.normal(0.0, noise, markers.shape)
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_analytic_jacobian_matches_finite_differences(side):
+    hand = HandModel(side=side)
+    solver = HandSolver(hand, HAN19.place(hand)[0])
+    rng = np.random.default_rng(3)
+    poses = np.concatenate([rng.normal(size=(4, 6)), np.radians(30) + rng.normal(0, 0.2, (4, 20))], axis=1)
+    markers, jac = solver.jacobian(poses)
+    numeric = np.zeros_like(jac)
+    for i in range(jac.shape[-1]):
+        step = np.zeros_like(poses)
+        step[:, i] = 1e-6
+        numeric[..., i] = (solver.markers(solver.step(poses, step)) - solver.markers(solver.step(poses, -step))) / 2e-6
+    np.testing.assert_allclose(markers, solver.markers(poses), atol=1e-12)
+    np.testing.assert_allclose(jac, numeric, atol=1e-7)
+
+
+def test_exact_markers_give_the_true_pose_within_limits():
+    hand = HandModel(side="right")
+    poses, observed = _take(hand, 400, seed=5)
+    fit = HandSolver(hand, HAN19.place(hand)[0]).solve(observed)
+    assert fit.solved.all()
+    assert np.nanmedian(fit.rms) < 1e-4  # metres
+    err = np.degrees(np.abs(fit.poses[:, 6:] - poses[:, 6:]))
+    assert np.median(err) < 0.5
+    assert (fit.poses[:, 6:] >= POSE_LIMITS[0, 6:] - 1e-9).all() and (fit.poses[:, 6:] <= POSE_LIMITS[1, 6:] + 1e-9).all()
+
+
+def test_missing_markers_drop_out_and_too_few_leave_the_frame_unsolved():
+    hand = HandModel(side="left")
+    _, observed = _take(hand, 120, seed=2)
+    observed[10:40, [3, 6, 9]] = np.nan  # three fingertips gone for a while
+    observed[60:70, MIN_MARKERS - 1:] = np.nan  # only MIN_MARKERS - 1 markers left
+    fit = HandSolver(hand, HAN19.place(hand)[0]).solve(observed)
+    assert np.isnan(fit.residuals[10:40, [3, 6, 9]]).all()
+    assert not fit.solved[60:70].any() and fit.solved[:60].all() and fit.solved[70:].all()
+    assert np.isnan(fit.poses[60:70]).all()
+    assert np.nanmax(fit.rms) < 1e-3
+
+
+def test_smoothing_removes_noise_but_keeps_the_motion():
+    hand = HandModel(side="right")
+    poses, observed = _take(hand, 600, seed=7, noise=0.001)
+    solver = HandSolver(hand, HAN19.place(hand)[0])
+    raw = solver.solve(observed)
+    smooth = solver.solve(observed, rate=120.0)
+    err_raw = np.abs(raw.poses[:, 6:] - poses[:, 6:])
+    err_smooth = np.abs(smooth.poses[:, 6:] - poses[:, 6:])
+    assert np.percentile(err_smooth, 95) < 0.8 * np.percentile(err_raw, 95)
+    # Unsolved frames split the filter's runs and stay NaN.
+    gappy = raw.poses.copy()
+    gappy[300] = np.nan
+    out = smooth_poses(gappy, 120.0, 10.0)
+    assert np.isnan(out[300]).all() and np.isfinite(out[:300]).all()
+    np.testing.assert_array_equal(smooth_poses(raw.poses, 120.0, 0.0), raw.poses)
+
+
+def test_calibration_recovers_offsets_and_hand_length():
+    base = HandModel(side="right")
+    true = HandModel(base.length * 1.1, base.breadth, "right")
+    rng = np.random.default_rng(11)
+    offsets = rng.normal(size=(len(HAN19), 3))
+    offsets *= 0.010 / np.linalg.norm(offsets, axis=1, keepdims=True)
+    _, observed = _take(true, 1200, seed=11, noise=0.0005, offsets=offsets, flat=60)
+    cal = calibrate(observed, HAN19, hand=base, frames=25, reference=np.arange(60))
+    assert cal.side == "right"
+    assert abs(cal.length / true.length - 1) < 0.02
+    assert np.linalg.norm(cal.offsets - offsets, axis=1).max() < 0.002
+    assert cal.rms_after < 0.25 * cal.rms_before
+
+
+def test_side_is_detected():
+    for side in ("left", "right"):
+        _, observed = _take(HandModel(side=side), 60, seed=4, noise=0.0005)
+        assert detect_side(observed, HAN19) == side
+
+
+def test_calibration_file_round_trip_and_errors(tmp_path):
+    cal = Calibration("han19", HAN19.names, "left", 0.2, 0.09, np.arange(57.0).reshape(19, 3) / 1e4, 0.005, 0.001,
+                      [1, 2])
+    path = tmp_path / "calib.json"
+    cal.save(path)
+    back = Calibration.load(path)
+    assert (back.side, back.length, back.breadth, back.frames) == ("left", 0.2, 0.09, [1, 2])
+    np.testing.assert_allclose(back.offsets, cal.offsets, atol=1e-9)
+    np.testing.assert_allclose(back.binding(HAN19).rest - HAN19.place(back.hand())[0].rest, cal.offsets, atol=1e-9)
+    with pytest.raises(MocapInputError, match="not 'glove13'"):
+        back.binding(load_layout("glove13"))
+    with pytest.raises(MocapInputError, match="not found"):
+        Calibration.load(tmp_path / "nope.json")
+    (tmp_path / "bad.json").write_text("{")
+    with pytest.raises(MocapInputError, match="bad.json.*not a readable"):
+        Calibration.load(tmp_path / "bad.json")
+    data = json.loads(path.read_text())
+    data["hand_length_mm"] = 9000
+    (tmp_path / "huge.json").write_text(json.dumps(data))
+    with pytest.raises(MocapInputError, match="not a valid calibration"):
+        Calibration.load(tmp_path / "huge.json")
+
+
+def test_real_glove_fits_within_three_millimetres_after_calibration():
+    from mocap_autolabel.core.take import read_take
+
+    layout = load_layout("glove13")
+    take = read_take(data_path("hands", "qualisys_glove13", "recording_part1.tsv"))
+    cols = [take.names.index(n) for n in layout.names]
+    observed = take.positions[:, cols].astype(float)
+    half = len(observed) // 2
+    cal = calibrate(observed[:half], layout, frames=30)
+    before = HandSolver(cal.hand(), layout.place(cal.hand())[0]).solve(observed[half:], rate=take.rate)
+    after = cal.solver(layout).solve(observed[half:], rate=take.rate)  # held-out half
+    assert after.overall_rms() < 0.003
+    assert after.overall_rms() < 0.5 * before.overall_rms()
