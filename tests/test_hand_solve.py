@@ -53,7 +53,8 @@ def test_exact_markers_give_the_true_pose_within_limits():
     assert np.nanmedian(fit.rms) < 1e-4  # metres
     err = np.degrees(np.abs(fit.poses[:, 6:] - poses[:, 6:]))
     assert np.median(err) < 0.5
-    assert (fit.poses[:, 6:] >= POSE_LIMITS[0, 6:] - 1e-9).all() and (fit.poses[:, 6:] <= POSE_LIMITS[1, 6:] + 1e-9).all()
+    joints = fit.poses[:, 6:]
+    assert (joints >= POSE_LIMITS[0, 6:] - 1e-9).all() and (joints <= POSE_LIMITS[1, 6:] + 1e-9).all()
 
 
 def test_missing_markers_drop_out_and_too_few_leave_the_frame_unsolved():

@@ -78,6 +78,24 @@ def build_parser() -> argparse.ArgumentParser:
     lab.add_argument("--report", metavar="REPORT.json", help="write counts, confidence, uncertain segments, timings")
     lab.add_argument("--labels", metavar="OUT.npz", help="write labels and confidences per frame and point slot")
 
+    sol = sub.add_parser("solve", help="fit the rigged hand to a labeled take: calibration, IK, Blender/FBX/BVH")
+    sol.add_argument("file", metavar="FILE", help="a labeled take (C3D, TRC or TSV) with the layout's marker names")
+    sol.add_argument("--layout", default="han19", help="built-in layout name or a layout .toml (default han19)")
+    sol.add_argument("--blend", metavar="OUT.blend", help="write the markers and the animated hand rig")
+    sol.add_argument("--fbx", metavar="OUT.fbx", help="export the animated rig as FBX (Blender's exporter)")
+    sol.add_argument("--bvh", metavar="OUT.bvh", help="export the animated rig as BVH (Blender's exporter)")
+    sol.add_argument("--calibration", metavar="CALIB.json",
+                     help="reuse this performer calibration (default: calibrate on this take)")
+    sol.add_argument("--save-calibration", metavar="CALIB.json", help="write the calibration used, for other takes")
+    sol.add_argument("--calibrate-seconds", type=float, metavar="S",
+                     help="calibrate on the first S seconds only (e.g. a range-of-motion start)")
+    sol.add_argument("--reference-frames", metavar="A:B",
+                     help="frames A to B-1 (0-based) hold a flat hand: calibration then also measures the "
+                          "marker offsets that a joint-angle bias would otherwise absorb")
+    sol.add_argument("--side", choices=("left", "right"), help="hand side (default: detected)")
+    sol.add_argument("--smooth-hz", type=float, default=10.0, help="low-pass cut-off of the pose track (0: off)")
+    sol.add_argument("--report", metavar="REPORT.json", help="per-frame and overall marker RMS (mm), calibration")
+
     trn = sub.add_parser("train", help="train a 'set' model for a marker layout from synthetic data (needs PyTorch)")
     trn.add_argument("--layout", required=True, help="built-in layout name or a layout .toml")
     trn.add_argument("-o", "--output", required=True, metavar="OUT.onnx", help="the model; its card goes beside it")
@@ -107,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "train" and not args.output.lower().endswith(".onnx"):
         print(f"mocap_autolabel train: error: -o must name a .onnx file, got {args.output!r}", file=sys.stderr)
         return EXIT_USAGE
-    command = {"info": _info, "import": _import, "synth": _synth, "label": _label, "train": _train}[args.command]
+    command = {"info": _info, "import": _import, "synth": _synth, "label": _label, "solve": _solve,
+               "train": _train}[args.command]
     return command(args)
 
 
@@ -206,7 +225,7 @@ def _label(args) -> int:
     import numpy as np
 
     from .core.atomic import atomic_output
-    from .core.labeling import labeled_take
+    from .core.labeling import labeled_take, layout_markers
     from .core.layout import load_layout
     from .core.pipeline import label_take
     from .core.synth.generate import load_truth, truth_path
@@ -225,7 +244,7 @@ def _label(args) -> int:
     try:
         layout = load_layout(args.layout)
         take = read_take(args.file)
-        labeled = _labeled_positions(read_take(args.fit), layout) if args.fit else None
+        labeled = layout_markers(read_take(args.fit), layout) if args.fit else None
         labeling = label_take(take, layout, method=args.method, temporal=args.temporal, model=args.model,
                               score=args.vote, p=args.p, q=args.q, n_best=args.n_best,
                               fit=labeled if args.method == "gmm" else None,
@@ -267,15 +286,98 @@ def _label(args) -> int:
     return EXIT_OK
 
 
-def _labeled_positions(take, layout):
-    """``(F, M, 3)`` positions of a labeled take in layout order; every layout name must be present."""
+def _solve(args) -> int:
+    from .core.atomic import atomic_output
     from .core.errors import MocapInputError
+    from .core.hand.calibrate import Calibration
+    from .core.layout import load_layout
+    from .core.pipeline import solve_take
+    from .core.take import read_take
 
-    where = {n: i for i, n in enumerate(take.names)}
-    missing = [n for n in layout.names if n not in where]
-    if missing:
-        raise MocapInputError(take.source, f"labeled take lacks layout markers {', '.join(missing[:5])}")
-    return take.positions[:, [where[n] for n in layout.names]].astype(float)
+    outputs = (("--blend", args.blend, ".blend"), ("--fbx", args.fbx, ".fbx"), ("--bvh", args.bvh, ".bvh"))
+    for flag, value, ext in outputs:
+        if value and not value.lower().endswith(ext):
+            print(f"mocap_autolabel solve: error: {flag} must name a {ext} file, got {value!r}", file=sys.stderr)
+            return EXIT_USAGE
+    reference = None
+    if args.reference_frames:
+        try:
+            a, b = (int(v) for v in args.reference_frames.split(":"))
+            if not 0 <= a < b:
+                raise ValueError
+        except ValueError:
+            print(f"mocap_autolabel solve: error: --reference-frames must be A:B with 0 <= A < B, "
+                  f"got {args.reference_frames!r}", file=sys.stderr)
+            return EXIT_USAGE
+        reference = range(a, b)
+    bpy = None
+    if args.blend or args.fbx or args.bvh:
+        bpy = _bpy_or_none("solve --blend/--fbx/--bvh")
+        if bpy is None:
+            return EXIT_FAILED
+    try:
+        layout = load_layout(args.layout)
+        calibration = Calibration.load(args.calibration) if args.calibration else None
+        take = read_take(args.file)
+        if reference is not None and reference.stop > take.n_frames:
+            raise MocapInputError(args.file, f"has {take.n_frames} frames; --reference-frames ends at {reference.stop}")
+        solved = solve_take(take, layout, calibration=calibration, calibrate_seconds=args.calibrate_seconds,
+                            reference=reference, side=args.side, smooth_hz=args.smooth_hz)
+    except Exception as exc:
+        return _fail(args.file, exc)
+    report = solved.report() | {"file": args.file}
+    cal = solved.calibration
+    fps = take.n_frames / max(solved.seconds["solve"], 1e-9)
+    print(f"{args.file}: {cal.side} hand {cal.length * 1000:.1f} x {cal.breadth * 1000:.1f} mm on {layout.name}; "
+          f"{report['solved_frames']} of {take.n_frames} frames solved in {solved.seconds['solve']:.2f} s "
+          f"({fps:,.0f} frames/s); marker RMS {report['marker_rms_mm']:.2f} mm, "
+          f"{report['frames_over_gate']} frames over the {report['gate_mm']:g} mm gate")
+    if args.calibration is None:
+        print(f"  calibrated on {len(cal.frames)} frames: RMS {cal.rms_before * 1000:.2f} -> "
+              f"{cal.rms_after * 1000:.2f} mm")
+    if args.save_calibration:
+        cal.save(args.save_calibration)
+        print(f"  calibration {args.save_calibration}")
+    if bpy is not None:
+        try:
+            _solve_outputs(bpy, take, solved, args)
+        except Exception as exc:
+            return _fail(args.file, exc)
+    if args.report:
+        with atomic_output(args.report) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(report, fh, indent=1)
+        print(f"  report   {args.report}")
+    return EXIT_OK
+
+
+def _solve_outputs(bpy, take, solved, args) -> None:
+    """The labeled markers beside the calibrated, animated rig; then .blend, FBX and BVH."""
+    from .blender.armature import build_hand, key_poses
+    from .blender.export import export_bvh, export_fbx
+    from .blender.scene import ImportOptions, build_take
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    build_take(take, scene, ImportOptions())
+    cal = solved.calibration
+    hand = cal.hand()
+    collection = bpy.data.collections.new("Hand")
+    scene.collection.children.link(collection)
+    objs = build_hand(hand, name="Hand", collection=collection, layout=solved.layout,
+                      binding=cal.binding(solved.layout))
+    arm = objs["armature"]
+    arm["mocap_calibration"] = json.dumps(cal.to_dict())
+    key_poses(arm, hand, solved.fit.poses, first_frame=solved.first_frame)
+    first, last = solved.first_frame, solved.first_frame + take.n_frames - 1
+    if args.blend:
+        _save_blend(bpy, args.blend)
+        print(f"  blend    {args.blend}")
+    if args.fbx:
+        export_fbx(arm, args.fbx, first, last)
+        print(f"  fbx      {args.fbx}")
+    if args.bvh:
+        export_bvh(arm, args.bvh, first, last)
+        print(f"  bvh      {args.bvh}")
 
 
 def _train(args) -> int:

@@ -28,8 +28,11 @@ def _homogeneous(rotations: np.ndarray, translations: np.ndarray) -> np.ndarray:
 
 
 def build_hand(hand: HandModel, name: str = "Hand", collection: bpy.types.Collection | None = None,
-               layout: Layout | None = None, mesh: bool = True) -> dict[str, bpy.types.Object]:
+               layout: Layout | None = None, mesh: bool = True,
+               binding: Binding | None = None) -> dict[str, bpy.types.Object]:
     """Create the hand's armature (and skinned mesh, and marker points) in ``collection``.
+
+    ``binding`` places the layout's markers (a calibration's); default: the layout's own places.
 
     Returns:
         ``{"armature": obj, "mesh": obj or absent, "markers": obj or absent}``. The mesh and the
@@ -66,7 +69,7 @@ def build_hand(hand: HandModel, name: str = "Hand", collection: bpy.types.Collec
         skin = build_mesh(hand)
         out["mesh"] = _skinned_object(f"{name}Skin", skin.binding, skin.faces, arm_obj, collection)
     if layout is not None:
-        binding, _ = layout.place(hand)
+        binding = binding if binding is not None else layout.place(hand)[0]
         obj = _skinned_object(f"{name}Markers", binding, None, arm_obj, collection)
         obj["marker_names"] = layout.names
         out["markers"] = obj
@@ -132,9 +135,15 @@ def set_pose(arm_obj: bpy.types.Object, hand: HandModel, pose: np.ndarray) -> No
 
 def key_poses(arm_obj: bpy.types.Object, hand: HandModel, poses: np.ndarray, first_frame: int = 1) -> None:
     """Keyframe ``poses (F, 26)`` on frames ``first_frame ...`` in bulk: every bone's quaternion,
-    and the root bone's location. Keys are LINEAR: consecutive captured frames, nothing to ease."""
+    and the root bone's location. Keys are LINEAR: consecutive captured frames, nothing to ease.
+    Frames whose pose is NaN (unsolved) get no key."""
+    poses = np.asarray(poses, dtype=float)
+    solved = np.isfinite(poses).all(axis=1)
+    frames = np.arange(first_frame, first_frame + len(poses), dtype=np.float64)[solved]
+    poses = poses[solved]
+    if not len(poses):
+        return
     bases = pose_bases(hand, poses, arm_obj)
-    frames = np.arange(first_frame, first_frame + len(poses), dtype=np.float64)
     quats = continuous_quaternions(matrix_to_quaternion(bases[..., :3, :3]), axis=0)
     animio.ensure_action(arm_obj, f"{arm_obj.name}Action")
     for b, name in enumerate(BONE_NAMES):

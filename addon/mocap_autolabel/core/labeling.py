@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import MocapInputError
+from .layout import Layout
 from .take import Take
 
 NULL = -1  #: the label of a ghost / unassigned segment
@@ -171,3 +173,18 @@ def segments_from_runs(names: list[str], labels: np.ndarray, valid: np.ndarray, 
                     start=start.astype(np.int64), stop=(start + length).astype(np.int64),
                     label=lab.T[slot, start].astype(np.int16), confidence=np.zeros(n, dtype=np.float32),
                     locked=np.zeros(n, dtype=bool), info=info)
+
+
+def layout_markers(take: Take, layout: Layout) -> np.ndarray:
+    """``(F, M, 3)`` positions of a labeled take in layout order (metres, NaN where missing).
+
+    Raises:
+        MocapInputError: the take lacks some of the layout's marker names.
+    """
+    where = {n: i for i, n in enumerate(take.names)}
+    missing = [n for n in layout.names if n not in where]
+    if missing:
+        more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
+        raise MocapInputError(take.source, f"is not labeled with layout {layout.name!r}: it lacks "
+                                           f"{', '.join(missing[:5])}{more}")
+    return take.positions[:, [where[n] for n in layout.names]].astype(float)

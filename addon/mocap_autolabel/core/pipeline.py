@@ -1,4 +1,6 @@
-"""``label_take``: the one entry point from a raw take to a Labeling (CLI, batch and Blender use it).
+"""The entry points the CLI, batch and Blender share.
+
+``label_take``: a raw take to a Labeling. ``solve_take``: a labeled take to a solved hand.
 
 Take -> tracklets -> per-frame scores (any labeler) -> user constraints -> temporal decision
 (trajectory voting, N-best Viterbi, or none) -> calibrated confidence per segment.
@@ -8,13 +10,16 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import MocapInputError
+from .hand.calibrate import Calibration, calibrate
+from .hand.ik import GATE, MIN_MARKERS, Fit
 from .labelers import METHODS, FrameBatch, Labeler, make_labeler, pack_frames
 from .labelers.assign import assign, row_probabilities
-from .labeling import EMPTY, NULL, Constraint, Labeling, segments_from_runs
+from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
 from .layout import Layout
 from .take import Take
 from .temporal.confidence import load_calibration, segment_evidence
@@ -205,3 +210,78 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     times["total"] = time.perf_counter() - t0
     info["seconds"] = {key: round(v, 4) for key, v in times.items()}
     return labeling
+
+
+@dataclass
+class HandSolve:
+    """A hand solved over a labeled take.
+
+    Attributes:
+        calibration: the performer's hand and markers it was solved with.
+        fit: poses ``(F, 26)``, fitted markers and residuals per frame.
+        layout: the marker layout.
+        rate: frames per second; first_frame: the take's first frame number.
+        seconds: wall time of each stage.
+    """
+
+    calibration: Calibration
+    fit: Fit
+    layout: Layout
+    rate: float
+    first_frame: int
+    seconds: dict
+
+    def report(self) -> dict:
+        """Per-frame and overall marker RMS in millimetres, per-marker RMS, calibration, timings."""
+        fit = self.fit
+        rms = fit.rms * 1000
+        gate = np.isfinite(rms) & (rms > GATE * 1000)
+        with np.errstate(invalid="ignore"):
+            per_marker = np.sqrt(np.nanmean(np.where(fit.solved[:, None], fit.residuals, np.nan) ** 2, axis=0)) * 1000
+        return {
+            "layout": self.layout.name,
+            "frames": len(rms),
+            "solved_frames": int(fit.solved.sum()),
+            "marker_rms_mm": round(fit.overall_rms() * 1000, 4),
+            "frames_over_gate": int(gate.sum()),
+            "gate_mm": GATE * 1000,
+            "per_marker_rms_mm": {n: (round(float(v), 4) if np.isfinite(v) else None)
+                                  for n, v in zip(self.layout.names, per_marker)},
+            "per_frame_rms_mm": [round(float(v), 3) if np.isfinite(v) else None for v in rms],
+            "calibration": self.calibration.to_dict(),
+            "seconds": self.seconds,
+        }
+
+
+def solve_take(take: Take, layout: Layout, calibration: Calibration | None = None,
+               calibrate_seconds: float | None = None, reference: Sequence[int] | None = None,
+               side: str | None = None, smooth_hz: float = 10.0) -> HandSolve:
+    """Fit the hand to a labeled take: calibrate (unless given a calibration), then solve every frame.
+
+    Args:
+        take: a labeled take whose point names include every marker of ``layout``.
+        layout: the marker layout.
+        calibration: a performer's calibration to reuse; None calibrates on this take.
+        calibrate_seconds: calibrate on the take's first seconds only (default: all of it).
+        reference: frames (0-based) in which the hand is flat (see :func:`calibrate`).
+        side: ``left``/``right``; detected from the markers when None.
+        smooth_hz: low-pass cut-off for the pose track (0: none).
+    """
+    observed = layout_markers(take, layout)
+    if not (np.isfinite(observed).all(axis=-1).sum(axis=1) >= MIN_MARKERS).any():
+        raise MocapInputError(take.source, f"no frame shows {MIN_MARKERS} or more of the layout's markers")
+    seconds = {}
+    start = time.perf_counter()
+    if calibration is None:
+        stop = len(observed) if calibrate_seconds is None else max(1, int(round(calibrate_seconds * take.rate)))
+        calibration = calibrate(observed[:stop], layout, side=side,
+                                reference=None if reference is None else np.asarray(reference))
+    else:
+        calibration.check(layout, "calibration")
+        if side is not None and side != calibration.side:
+            raise MocapInputError("calibration", f"is for a {calibration.side} hand, not a {side} one")
+    seconds["calibrate"] = round(time.perf_counter() - start, 4)
+    start = time.perf_counter()
+    fit = calibration.solver(layout).solve(observed, rate=take.rate, smooth_hz=smooth_hz)
+    seconds["solve"] = round(time.perf_counter() - start, 4)
+    return HandSolve(calibration, fit, layout, float(take.rate), int(take.first_frame), seconds)

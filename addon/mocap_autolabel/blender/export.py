@@ -1,0 +1,46 @@
+"""FBX and BVH of an animated armature through Blender's own exporters, headless.
+
+Both write to a temporary file that is renamed into place only when the exporter succeeded.
+"""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+
+from ..core.atomic import atomic_output
+from ..core.errors import MocapInputError
+
+
+def _only_selected(arm_obj: bpy.types.Object) -> None:
+    view_layer = bpy.context.view_layer
+    for obj in view_layer.objects:
+        obj.select_set(False)
+    arm_obj.select_set(True)
+    view_layer.objects.active = arm_obj
+
+
+def _run(path: str, export) -> None:
+    with atomic_output(path) as tmp:
+        result = export(tmp)
+        if "FINISHED" not in result or not os.path.isfile(tmp):
+            raise MocapInputError(path, f"Blender's exporter did not finish ({', '.join(result)})")
+
+
+def export_fbx(arm_obj: bpy.types.Object, path: str, frame_start: int, frame_end: int) -> None:
+    """The armature and its animation (every frame baked, no simplification) as FBX."""
+    _only_selected(arm_obj)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = frame_start, frame_end
+    _run(path, lambda tmp: bpy.ops.export_scene.fbx(
+        filepath=tmp, use_selection=True, object_types={"ARMATURE"}, add_leaf_bones=False,
+        bake_anim=True, bake_anim_use_all_actions=False, bake_anim_use_nla_strips=False,
+        bake_anim_simplify_factor=0.0, bake_anim_force_startend_keying=True))
+
+
+def export_bvh(arm_obj: bpy.types.Object, path: str, frame_start: int, frame_end: int) -> None:
+    """The armature's animation as BVH (Euler rotations in each bone's native order)."""
+    _only_selected(arm_obj)
+    _run(path, lambda tmp: bpy.ops.export_anim.bvh(filepath=tmp, frame_start=frame_start, frame_end=frame_end,
+                                                   rotate_mode="NATIVE", global_scale=1.0))

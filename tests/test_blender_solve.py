@@ -1,0 +1,135 @@
+"""The solve command in the bpy module: the rig in the .blend, and FBX/BVH that re-import with the same joints."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from mocap_autolabel.core.formats.c3d import write_c3d
+from mocap_autolabel.core.hand.skeleton import BONE_NAMES
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.synth.generate import clean_config, synthesize
+from mocap_autolabel.core.take import Take
+
+FRAMES = (1, 37, 150, 299)
+
+
+@pytest.fixture(scope="module")
+def solved(tmp_path_factory, bpy_module):
+    """A labeled synthetic take solved by the CLI with every output."""
+    from mocap_autolabel.cli import main
+
+    folder = tmp_path_factory.mktemp("solve")
+    layout = load_layout("han19")
+    synth = synthesize(layout, 300, seed=8, config=clean_config())
+    markers = synth.markers + np.random.default_rng(8).normal(0, 0.0005, synth.markers.shape)
+    markers[100:130, 5] = np.nan  # a gap: that marker drops out of those frames
+    take = Take(positions=markers.astype(np.float32), names=layout.names, rate=120.0, first_frame=1,
+                source="labeled.c3d")
+    write_c3d(take, folder / "labeled.c3d")
+    out = {k: folder / f"out.{k}" for k in ("blend", "fbx", "bvh")}
+    code = main(["solve", str(folder / "labeled.c3d"), "--blend", str(out["blend"]), "--fbx", str(out["fbx"]),
+                 "--bvh", str(out["bvh"]), "--report", str(folder / "report.json"),
+                 "--save-calibration", str(folder / "calib.json")])
+    assert code == 0
+    return out | {"report": folder / "report.json", "calib": folder / "calib.json", "synth": synth}
+
+
+def _bone_rotations(bpy, arm, frames=FRAMES) -> dict[str, np.ndarray]:
+    """Per bone ``(len(frames), 3, 3)``: its rotation in the world at each frame."""
+    scene = bpy.context.scene
+    out = {name: [] for name in BONE_NAMES}
+    for f in frames:
+        scene.frame_set(f)
+        world = np.array(arm.matrix_world)[:3, :3]  # an importer may animate the object itself
+        world = world / np.linalg.norm(world, axis=0)
+        for name in BONE_NAMES:
+            out[name].append(world @ np.array(arm.pose.bones[name].matrix)[:3, :3])
+    return {n: np.array(v) for n, v in out.items()}
+
+
+def _changes(rotations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Each bone's rotation since the first frame, in the world: ``R(f) R(f0)^T``.
+
+    Another program may give a bone another rest orientation or roll (a constant factor on the
+    right of R); this cancels it, and with every bone's change equal, every joint rotation is.
+    """
+    return {n: r @ np.swapaxes(r[:1], -1, -2) for n, r in rotations.items()}
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    rel = np.swapaxes(a, -1, -2) @ b
+    cos = (np.trace(rel, axis1=-2, axis2=-1) - 1) / 2
+    return float(np.degrees(np.arccos(np.clip(cos, -1, 1))).max())
+
+
+def _reference(bpy, solved):
+    bpy.ops.wm.open_mainfile(filepath=str(solved["blend"]))
+    return _bone_rotations(bpy, bpy.data.objects["Hand"])
+
+
+def test_blend_has_the_calibrated_rig_keyed_on_every_solved_frame(bpy_module, solved):
+    bpy = bpy_module
+    from mocap_autolabel.blender import animio
+
+    bpy.ops.wm.open_mainfile(filepath=str(solved["blend"]))
+    arm = bpy.data.objects["Hand"]
+    cal = json.loads(arm["mocap_calibration"])
+    assert cal["layout"] == "han19" and cal["side"] == solved["synth"].hand.side
+    curves = [fc for fc in animio.fcurves_of(arm) if fc.data_path.endswith("rotation_quaternion")]
+    assert len(curves) == 4 * len(BONE_NAMES)
+    assert {len(fc.keyframe_points) for fc in curves} == {300}
+    assert "HandMarkers" in bpy.data.objects and len(bpy.data.objects["HandMarkers"].data.vertices) == 19
+    report = json.loads(solved["report"].read_text())
+    assert report["solved_frames"] == 300 and report["marker_rms_mm"] < 1.5
+    assert len(report["per_frame_rms_mm"]) == 300 and report["per_marker_rms_mm"]["IndexPIP"] is not None
+
+
+def test_solved_joint_angles_follow_the_truth(bpy_module, solved):
+    """The keyed rig and the true hand agree in their joint rotations (a loose, noise-level bound)."""
+    bpy = bpy_module
+    from mocap_autolabel.blender.armature import build_hand, key_poses
+
+    ours = _reference(bpy, solved)
+    synth = solved["synth"]
+    truth = build_hand(synth.hand, name="Truth", mesh=False)["armature"]
+    key_poses(truth, synth.hand, synth.poses, first_frame=1)
+    true_rot = _bone_rotations(bpy, truth)
+    errors = [_angle_deg(ours[n], true_rot[n]) for n in BONE_NAMES]
+    assert np.median(errors) < 5.0
+
+
+@pytest.mark.parametrize("kind", ["fbx", "bvh"])
+def test_exports_reimport_with_the_same_joint_rotations(bpy_module, solved, kind):
+    bpy = bpy_module
+    reference = _reference(bpy, solved)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.fps, scene.render.fps_base = 120, 1.0
+    if kind == "fbx":
+        bpy.ops.import_scene.fbx(filepath=str(solved["fbx"]), anim_offset=0.0)  # the default shifts by 1
+    else:
+        # Blender's BVH exporter writes its own Z-up axes; the importer assumes Y-up unless told.
+        bpy.ops.import_anim.bvh(filepath=str(solved["bvh"]), frame_start=1, use_fps_scale=False,
+                                axis_forward="Y", axis_up="Z")
+    arm = next(o for o in bpy.context.scene.objects if o.type == "ARMATURE")
+    assert {b.name for b in arm.data.bones} >= set(BONE_NAMES)
+    back = _bone_rotations(bpy, arm)
+    ref_change, back_change = _changes(reference), _changes(back)
+    worst = max(_angle_deg(ref_change[n], back_change[n]) for n in BONE_NAMES)
+    assert worst < 0.1, f"{kind}: joint rotations differ by up to {worst:.3f} degrees"
+
+
+def test_solve_errors_are_one_line(tmp_path, capsys, bpy_module):
+    from mocap_autolabel.cli import main
+
+    raw = synthesize(load_layout("han19"), 20, seed=1).take  # unlabeled: *N names
+    write_c3d(raw, tmp_path / "raw.c3d")
+    assert main(["solve", str(tmp_path / "raw.c3d")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "raw.c3d" in err and "not labeled with layout 'han19'" in err
+    assert main(["solve", str(tmp_path / "raw.c3d"), "--fbx", "x.obj"]) == 2
+    (tmp_path / "calib.json").write_text("{}")
+    assert main(["solve", str(tmp_path / "raw.c3d"), "--calibration", str(tmp_path / "calib.json")]) == 1
+    assert "not a valid calibration" in capsys.readouterr().err
