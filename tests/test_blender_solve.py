@@ -133,3 +133,28 @@ def test_solve_errors_are_one_line(tmp_path, capsys, bpy_module):
     (tmp_path / "calib.json").write_text("{}")
     assert main(["solve", str(tmp_path / "raw.c3d"), "--calibration", str(tmp_path / "calib.json")]) == 1
     assert "not a valid calibration" in capsys.readouterr().err
+
+
+def test_solve_operator_on_an_imported_labeled_take(bpy_module, solved, tmp_path):
+    bpy = bpy_module
+    import addon_utils
+    from mocap_autolabel.blender import animio
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    addon_utils.enable("mocap_autolabel", default_set=True)  # factory settings (the CLI's) turned it off
+    labeled = solved["blend"].parent / "labeled.c3d"
+    bpy.ops.mocap_autolabel.import_markers(filepath=str(labeled))
+    bpy.context.view_layer.objects.active = bpy.data.objects["IndexTip"]
+    calib = tmp_path / "calib.json"
+    result = bpy.ops.mocap_autolabel.solve_hand(layout="han19", calibration=str(solved["calib"]),
+                                                save_calibration=str(calib))
+    assert result == {"FINISHED"}
+    arm = bpy.data.objects["Hand"]
+    assert json.loads(calib.read_text())["hand_length_mm"] == json.loads(solved["calib"].read_text())["hand_length_mm"]
+    assert {len(fc.keyframe_points) for fc in animio.fcurves_of(arm)} == {300}
+    # A bad calibration file is one error, and nothing is added.
+    objects = len(bpy.data.objects)
+    (tmp_path / "bad.json").write_text("[")
+    with pytest.raises(RuntimeError, match="bad.json"):
+        bpy.ops.mocap_autolabel.solve_hand(layout="han19", calibration=str(tmp_path / "bad.json"))
+    assert len(bpy.data.objects) == objects

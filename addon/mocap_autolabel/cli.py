@@ -352,22 +352,16 @@ def _solve(args) -> int:
 
 def _solve_outputs(bpy, take, solved, args) -> None:
     """The labeled markers beside the calibrated, animated rig; then .blend, FBX and BVH."""
-    from .blender.armature import build_hand, key_poses
+    from .blender.armature import build_solved_hand
     from .blender.export import export_bvh, export_fbx
     from .blender.scene import ImportOptions, build_take
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     build_take(take, scene, ImportOptions())
-    cal = solved.calibration
-    hand = cal.hand()
     collection = bpy.data.collections.new("Hand")
     scene.collection.children.link(collection)
-    objs = build_hand(hand, name="Hand", collection=collection, layout=solved.layout,
-                      binding=cal.binding(solved.layout))
-    arm = objs["armature"]
-    arm["mocap_calibration"] = json.dumps(cal.to_dict())
-    key_poses(arm, hand, solved.fit.poses, first_frame=solved.first_frame)
+    arm = build_solved_hand(solved, collection)
     first, last = solved.first_frame, solved.first_frame + take.n_frames - 1
     if args.blend:
         _save_blend(bpy, args.blend)

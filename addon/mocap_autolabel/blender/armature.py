@@ -157,3 +157,18 @@ def key_poses(arm_obj: bpy.types.Object, hand: HandModel, poses: np.ndarray, fir
                 fc = animio.find_fcurve(arm_obj, f"{path}.location", i) or animio.new_fcurve(
                     arm_obj, f"{path}.location", i, group=name)
                 animio.write_keys(fc, frames, bases[:, b, i, 3])
+
+
+def build_solved_hand(solved, collection: bpy.types.Collection | None = None, name: str = "Hand") -> bpy.types.Object:
+    """The calibrated rig of a :class:`~mocap_autolabel.core.pipeline.HandSolve`, keyed on every solved
+    frame, its markers placed by the calibration; the calibration is kept on the armature."""
+    import json
+
+    cal = solved.calibration
+    hand = cal.hand()
+    objs = build_hand(hand, name=name, collection=collection, layout=solved.layout, binding=cal.binding(solved.layout))
+    arm = objs["armature"]
+    arm["mocap_calibration"] = json.dumps(cal.to_dict())
+    arm["mocap_marker_rms_mm"] = solved.fit.overall_rms() * 1000
+    key_poses(arm, hand, solved.fit.poses, first_frame=solved.first_frame)
+    return arm
