@@ -110,6 +110,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                constraints: Sequence[Constraint] = (), model: str | None = None, fit: np.ndarray | None = None,
                start: np.ndarray | None = None, score: str = "likelihood", p: float = 2.0, q: float = -0.5,
                n_best: int = 5, split_swaps: bool = True, labeler: Labeler | None = None, calibrate: bool = True,
+               validate: bool = False, hand: Calibration | None = None,
                progress: Callable[[str], None] | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
@@ -128,6 +129,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         labeler: a ready labeler to use instead of building one from ``method`` (e.g. a ``gmm``
             fitted once for a performer and used for all their takes).
         calibrate: map raw segment confidences through the shipped calibration, where one exists.
+        validate: IK validation (:mod:`.validate`, ``vote`` only): fit the hand to the labels, vote
+            again with the fit's evidence, and downgrade segments the hand cannot explain.
+        hand: the performer's calibration for ``validate`` (default: calibrated on this take).
         progress: called with a short message at each stage.
 
     Returns:
@@ -145,6 +149,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         if not (0 <= c.slot < take.n_points and 0 <= c.start < c.stop <= take.n_frames):
             raise ValueError(f"constraint {c} lies outside the take ({take.n_frames} frames, {take.n_points} slots)")
     check_constraints(constraints, len(layout))
+    if validate and temporal != "vote":
+        raise ValueError("validate needs temporal='vote'")
     say = progress or (lambda _msg: None)
     times: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -161,13 +167,6 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     scores = _apply_constraints(scores, slots, mask, constraints)
     times["scores"] = time.perf_counter() - t
 
-    say(f"temporal step: {temporal}")
-    t = time.perf_counter()
-    f_idx, k_idx = np.nonzero(mask)
-    logp = np.log(np.maximum(row_probabilities(scores[f_idx, k_idx]), np.exp(LOG_FLOOR))).astype(np.float32)
-    frame_labels, frame_conf = assign(scores, mask)
-    samples = Samples(frame=f_idx.astype(np.int64), slot=slots[f_idx, k_idx].astype(np.int64), logp=logp,
-                      label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
     tracklets = find_tracklets(take)
     cuts: dict[int, list[int]] = {}
     for c in constraints:
@@ -176,9 +175,45 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     locked_at = np.full(valid.shape, EMPTY, dtype=np.int16)  # the locked label of each sample
     for c in constraints:
         locked_at[c.start:c.stop, c.slot] = np.where(valid[c.start:c.stop, c.slot], c.label, EMPTY)
-
     info = {"method": method, "temporal": temporal, "layout": layout.name, "frames": take.n_frames,
             "slots": take.n_points, "constraints": len(constraints)}
+
+    def decide(scores: np.ndarray) -> Labeling:
+        return _decide(scores, batch, take, layout, method, temporal, segments, locked_at, info, score, p, q,
+                       split_swaps, n_best, calibrate)
+
+    say(f"temporal step: {temporal}")
+    t = time.perf_counter()
+    labeling = decide(scores)
+    times["temporal"] = time.perf_counter() - t
+    if validate:
+        say("validating with the hand fit")
+        t = time.perf_counter()
+        from .validate import downgrade, fit_labeling, fit_scores, segment_residuals
+
+        hand, hand_fit = fit_labeling(take, layout, labeling, hand)
+        labeling = decide(scores + fit_scores(points, mask, hand_fit.markers, spread=hand_fit.overall_rms()))
+        residuals = segment_residuals(take, labeling, hand_fit)
+        info["validation"] = {"hand_length_mm": round(hand.length * 1000, 2), "side": hand.side,
+                              "marker_rms_mm": round(hand_fit.overall_rms() * 1000, 3),
+                              "downgraded_segments": downgrade(labeling, residuals)}
+        times["validate"] = time.perf_counter() - t
+    times["total"] = time.perf_counter() - t0
+    info["seconds"] = {key: round(v, 4) for key, v in times.items()}
+    return labeling
+
+
+def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, method: str, temporal: str,
+            segments: Segments, locked_at: np.ndarray, info: dict, score: str, p: float, q: float,
+            split_swaps: bool, n_best: int, calibrate: bool) -> Labeling:
+    """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences."""
+    points, mask, slots = batch.points, batch.mask, batch.slots
+    valid = take.valid
+    f_idx, k_idx = np.nonzero(mask)
+    logp = np.log(np.maximum(row_probabilities(scores[f_idx, k_idx]), np.exp(LOG_FLOOR))).astype(np.float32)
+    frame_labels, frame_conf = assign(scores, mask)
+    samples = Samples(frame=f_idx.astype(np.int64), slot=slots[f_idx, k_idx].astype(np.int64), logp=logp,
+                      label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
     if temporal == "vote":
         segments, label, seg, facts = vote(samples, segments, locked_at, score, p, q, split_swaps)
         info.update(facts)
@@ -198,8 +233,6 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         split[segments.start, segments.slot] = True
         labeling = segments_from_runs(layout.names, per, valid, info, split=split)
         labeling.locked = locked_at[labeling.start, labeling.slot] != EMPTY
-    times["temporal"] = time.perf_counter() - t
-
     labeling.evidence = segment_evidence(labeling, samples)
     labeling.confidence = labeling.evidence[:, 0].copy()  # the mean probability, until calibrated
     calibration = load_calibration(method, temporal, layout.name) if calibrate else None
@@ -207,8 +240,6 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         labeling.confidence = calibration(labeling.evidence)
     labeling.confidence[labeling.locked] = 1.0
     info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
-    times["total"] = time.perf_counter() - t0
-    info["seconds"] = {key: round(v, 4) for key, v in times.items()}
     return labeling
 
 

@@ -181,6 +181,8 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
     hand = HandModel(hand.length, hand.breadth, side)
     placed, normals = layout.place(hand)
     candidates = _well_seen(observed)
+    if len(candidates) > 60 * frames:  # plenty to choose varied poses from, at a bounded cost
+        candidates = candidates[np.linspace(0, len(candidates) - 1, 60 * frames).astype(int)]
     first = HandSolver(hand, placed).solve(observed[candidates])
     ok = first.solved
     chosen = _diverse(first.poses[ok, 6:], frames)

@@ -1,0 +1,167 @@
+"""Hand solve benchmark: IK speed, joint-angle error on synthetic takes, calibration recovery, real glove RMS.
+
+    python benchmarks/hand_solve.py [--quick]
+
+Writes benchmarks/reports/hand_solve.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "addon"))
+sys.path.insert(0, os.path.dirname(__file__))
+
+from mocap_autolabel.core.hand import HandModel, blend  # noqa: E402
+from mocap_autolabel.core.hand.calibrate import _offset, calibrate  # noqa: E402
+from mocap_autolabel.core.hand.ik import HandSolver  # noqa: E402
+from mocap_autolabel.core.layout import load_layout  # noqa: E402
+from mocap_autolabel.core.synth.motion import generate_motion  # noqa: E402
+
+REPORT = os.path.join(os.path.dirname(__file__), "reports", "hand_solve.md")
+FLAT = np.radians([0, 20, 0, 0] + [0] * 16)
+
+
+def synthetic(layout, hand, frames, seed, noise, offsets=None, flat=0):
+    rng = np.random.default_rng(seed)
+    poses = generate_motion(rng, frames, 120.0)
+    poses[:flat, 6:] = FLAT
+    binding = layout.place(hand)[0] if offsets is None else _offset(layout.place(hand)[0], offsets)
+    markers = blend(*hand.skinning_transforms(poses), binding)
+    return poses, markers + rng.normal(0.0, noise, markers.shape)
+
+
+def joint_errors(args, lines):
+    lines += ["## Joint angles on synthetic takes (1 mm noise per axis, known hand)", "",
+              "Error of the 20 joint angles against the truth, every frame; `raw` is each frame's own fit, "
+              "`smoothed` the default (10 Hz zero-phase low-pass of the pose track).", "",
+              "| layout | frames | raw median | raw p95 | smoothed median | smoothed p95 | marker RMS mm | frames/s |",
+              "|---|---|---|---|---|---|---|---|"]
+    for name in ("han19", "glove13"):
+        layout = load_layout(name)
+        raw_err, smooth_err, rms, fps = [], [], [], []
+        for seed in range(2 if args.quick else 4):
+            hand = HandModel(side="left" if seed % 2 else "right")
+            poses, observed = synthetic(layout, hand, 3000, seed, 0.001)
+            solver = HandSolver(hand, layout.place(hand)[0])
+            raw = solver.solve(observed)
+            t = time.perf_counter()
+            smooth = solver.solve(observed, rate=120.0)
+            fps.append(len(observed) / (time.perf_counter() - t))
+            raw_err.append(np.degrees(np.abs(raw.poses[:, 6:] - poses[:, 6:])).ravel())
+            smooth_err.append(np.degrees(np.abs(smooth.poses[:, 6:] - poses[:, 6:])).ravel())
+            rms.append(smooth.overall_rms() * 1000)
+        r, s = np.concatenate(raw_err), np.concatenate(smooth_err)
+        lines.append(f"| {name} | {len(raw_err)} x 3000 | {np.median(r):.2f} | {np.percentile(r, 95):.2f} | "
+                     f"{np.median(s):.2f} | {np.percentile(s, 95):.2f} | {np.mean(rms):.2f} | {np.median(fps):,.0f} |")
+        print(lines[-1], flush=True)
+    lines += ["", "Bar: median <= 2 degrees, 95th percentile <= 6 degrees (han19: the layout with a marker on every "
+              "phalanx group; glove13 has one marker per finger besides the tip, so PIP and DIP share one "
+              "constraint and the table shows it).", ""]
+
+
+def speed(args, lines):
+    layout = load_layout("han19")
+    hand = HandModel(side="right")
+    _, observed = synthetic(layout, hand, 10_000, 42, 0.001)
+    solver = HandSolver(hand, layout.place(hand)[0])
+    rows = []
+    for label, rate in (("per-frame fit", None), ("with smoothing (default)", 120.0)):
+        best = np.inf
+        for _ in range(1 if args.quick else 3):
+            t = time.perf_counter()
+            solver.solve(observed, rate=rate)
+            best = min(best, time.perf_counter() - t)
+        rows.append(f"| {label} | {len(observed)} | {best:.2f} | {len(observed) / best:,.0f} |")
+        print(rows[-1], flush=True)
+    lines += ["## Speed (one hand, han19, 10,000 frames, 2 cores)", "",
+              "| solve | frames | seconds | frames/s |", "|---|---|---|---|", *rows, "",
+              "Bar: at least 1,000 frames/s. Frames are solved in lock-stepped chunks (up to 256 side by side), "
+              "each warm-started from its predecessor with 5 Levenberg-Marquardt steps on the analytic Jacobian.", ""]
+
+
+def calibration(args, lines):
+    layout = load_layout("han19")
+    lines += ["## Calibration recovery (synthetic, han19, 2,400 frames, 0.5 mm noise)", "",
+              "Offsets: every marker moved 10 mm in a random direction. Length: the hand 10 % longer than the "
+              "starting hand. `flat` = the take starts with 0.5 s of flat hand given as reference frames.", "",
+              "| perturbation | reference | seed | length error | max offset error mm | mean offset error mm | "
+              "RMS before -> after mm | seconds |", "|---|---|---|---|---|---|---|---|"]
+    for kind in ("offsets", "length", "both"):
+        for reference in (True, False):
+            for seed in range(1 if args.quick else 2):
+                rng = np.random.default_rng(100 + seed)
+                side = "left" if seed else "right"
+                base = HandModel(side=side)
+                true = HandModel(base.length * (1.1 if kind != "offsets" else 1.0), base.breadth, side)
+                offsets = rng.normal(size=(len(layout), 3))
+                offsets *= 0.010 / np.linalg.norm(offsets, axis=1, keepdims=True)
+                if kind == "length":
+                    offsets[:] = 0
+                _, observed = synthetic(layout, true, 2400, 100 + seed, 0.0005, offsets, flat=60)
+                t = time.perf_counter()
+                cal = calibrate(observed, layout, hand=base, reference=np.arange(60) if reference else None)
+                dt = time.perf_counter() - t
+                err = np.linalg.norm(cal.offsets - offsets, axis=1) * 1000
+                lines.append(f"| {kind} | {'flat' if reference else 'none'} | {seed} | "
+                             f"{100 * (cal.length / true.length - 1):+.2f} % | {err.max():.2f} | {err.mean():.2f} | "
+                             f"{cal.rms_before * 1000:.2f} -> {cal.rms_after * 1000:.2f} | {dt:.1f} |")
+                print(lines[-1], flush=True)
+    lines += ["", "Bars: offsets within 2 mm, length within 2 %. Without a reference pose, an offset of a lone "
+              "marker on a phalanx along its arc is exactly a constant joint-angle bias, so the data cannot tell "
+              "them apart and the prior decides; a reference pose (the flat hand most range-of-motion protocols "
+              "start with) settles it.", ""]
+
+
+def real_glove(args, lines):
+    from datasets import GLOVE13
+
+    if not os.path.isfile(GLOVE13):
+        lines += ["## Real glove13 recording", "", f"skipped: {GLOVE13} not available", ""]
+        return
+    from mocap_autolabel.core.labeling import layout_markers
+    from mocap_autolabel.core.take import read_take
+
+    layout = load_layout("glove13")
+    take = read_take(GLOVE13)
+    observed = layout_markers(take, layout)
+    half = len(observed) // 2
+    t = time.perf_counter()
+    cal = calibrate(observed[:half], layout)
+    dt = time.perf_counter() - t
+    default = HandModel(side=cal.side)
+    before = HandSolver(default, layout.place(default)[0]).solve(observed, rate=take.rate)
+    after = cal.solver(layout).solve(observed, rate=take.rate)
+    held = np.sqrt(np.nanmean(after.residuals[half:] ** 2)) * 1000
+    held_before = np.sqrt(np.nanmean(before.residuals[half:] ** 2)) * 1000
+    lines += ["## Real glove13 recording (Qualisys, 13 markers, 3,000 frames at 100 Hz)", "",
+              "Calibrated on the first half; the second half is held out.", "",
+              "| | marker RMS, whole take mm | held-out half mm |", "|---|---|---|",
+              f"| average hand, layout positions | {before.overall_rms() * 1000:.2f} | {held_before:.2f} |",
+              f"| calibrated ({cal.side} hand {cal.length * 1000:.1f} x {cal.breadth * 1000:.1f} mm, {dt:.1f} s) | "
+              f"{after.overall_rms() * 1000:.2f} | {held:.2f} |", "", "Bar: at most 3 mm after calibration.", ""]
+    print(*lines[-6:], sep="\n", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="fewer takes and repeats")
+    args = parser.parse_args()
+    lines = ["# Hand solve benchmark", "", "`python benchmarks/hand_solve.py`; numbers from this machine (2 cores).", ""]
+    speed(args, lines)
+    joint_errors(args, lines)
+    calibration(args, lines)
+    real_glove(args, lines)
+    os.makedirs(os.path.dirname(REPORT), exist_ok=True)
+    with open(REPORT, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines) + "\n")
+    print(f"wrote {REPORT}")
+
+
+if __name__ == "__main__":
+    main()
