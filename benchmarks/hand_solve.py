@@ -152,7 +152,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="fewer takes and repeats")
     args = parser.parse_args()
-    lines = ["# Hand solve benchmark", "", "`python benchmarks/hand_solve.py`; numbers from this machine (2 cores).", ""]
+    lines = ["# Hand solve benchmark", "",
+             "`python benchmarks/hand_solve.py`; numbers from this machine (2 cores).", ""]
     speed(args, lines)
     joint_errors(args, lines)
     calibration(args, lines)

@@ -75,6 +75,11 @@ def build_parser() -> argparse.ArgumentParser:
     lab.add_argument("--fit", metavar="LABELED",
                      help="a labeled take of the subject: gmm fits on it; nearest starts from its first frame "
                           "(default for nearest: set's labels of the first frame)")
+    lab.add_argument("--validate", action="store_true",
+                     help="IK validation: fit the hand to the labels, vote again with the fit's evidence, and "
+                          "downgrade segments the hand cannot explain (vote only; slower: it calibrates a hand)")
+    lab.add_argument("--calibration", metavar="CALIB.json",
+                     help="the performer's hand calibration for --validate (default: calibrated on this take)")
     lab.add_argument("--report", metavar="REPORT.json", help="write counts, confidence, uncertain segments, timings")
     lab.add_argument("--labels", metavar="OUT.npz", help="write labels and confidences per frame and point slot")
 
@@ -237,6 +242,9 @@ def _label(args) -> int:
     if not (1 <= args.n_best <= 100 and args.p > 0):
         print("mocap_autolabel label: error: --n-best must be 1 to 100 and --p positive", file=sys.stderr)
         return EXIT_USAGE
+    if args.validate and args.temporal != "vote":
+        print("mocap_autolabel label: error: --validate needs --temporal vote", file=sys.stderr)
+        return EXIT_USAGE
     if args.method == "gmm" and not args.fit:
         print("mocap_autolabel label: error: gmm needs --fit LABELED: a labeled take of the subject to fit on",
               file=sys.stderr)
@@ -245,8 +253,15 @@ def _label(args) -> int:
         layout = load_layout(args.layout)
         take = read_take(args.file)
         labeled = layout_markers(read_take(args.fit), layout) if args.fit else None
+        hand = None
+        if args.calibration:
+            from .core.hand.calibrate import Calibration
+
+            hand = Calibration.load(args.calibration)
+            hand.check(layout, args.calibration)
         labeling = label_take(take, layout, method=args.method, temporal=args.temporal, model=args.model,
                               score=args.vote, p=args.p, q=args.q, n_best=args.n_best,
+                              validate=args.validate, hand=hand,
                               fit=labeled if args.method == "gmm" else None,
                               start=labeled[0] if (labeled is not None and args.method == "nearest") else None)
         if args.output:
