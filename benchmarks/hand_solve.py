@@ -17,23 +17,17 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "addon"))
 sys.path.insert(0, os.path.dirname(__file__))
 
-from mocap_autolabel.core.hand import HandModel, blend  # noqa: E402
-from mocap_autolabel.core.hand.calibrate import _offset, calibrate  # noqa: E402
+from mocap_autolabel.core.hand import HandModel  # noqa: E402
+from mocap_autolabel.core.hand.calibrate import calibrate  # noqa: E402
 from mocap_autolabel.core.hand.ik import HandSolver  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
-from mocap_autolabel.core.synth.motion import generate_motion  # noqa: E402
+from mocap_autolabel.core.synth.generate import marker_motion  # noqa: E402
 
 REPORT = os.path.join(os.path.dirname(__file__), "reports", "hand_solve.md")
-FLAT = np.radians([0, 20, 0, 0] + [0] * 16)
 
 
 def synthetic(layout, hand, frames, seed, noise, offsets=None, flat=0):
-    rng = np.random.default_rng(seed)
-    poses = generate_motion(rng, frames, 120.0)
-    poses[:flat, 6:] = FLAT
-    binding = layout.place(hand)[0] if offsets is None else _offset(layout.place(hand)[0], offsets)
-    markers = blend(*hand.skinning_transforms(poses), binding)
-    return poses, markers + rng.normal(0.0, noise, markers.shape)
+    return marker_motion(layout, hand, frames, seed, noise, offsets, flat)
 
 
 def joint_errors(args, lines):

@@ -8,25 +8,19 @@ import numpy as np
 import pytest
 from conftest import data_path
 from mocap_autolabel.core.errors import MocapInputError
-from mocap_autolabel.core.hand import HandModel, blend
-from mocap_autolabel.core.hand.calibrate import Calibration, _offset, calibrate, detect_side
+from mocap_autolabel.core.hand import HandModel
+from mocap_autolabel.core.hand.calibrate import Calibration, calibrate, detect_side
 from mocap_autolabel.core.hand.ik import MIN_MARKERS, HandSolver, smooth_poses
 from mocap_autolabel.core.hand.skeleton import POSE_LIMITS
 from mocap_autolabel.core.layout import load_layout
-from mocap_autolabel.core.synth.motion import generate_motion
+from mocap_autolabel.core.synth.generate import marker_motion
 
 HAN19 = load_layout("han19")
-FLAT = np.radians([0, 20, 0, 0] + [0] * 16)
 
 
 def _take(hand: HandModel, frames: int, seed: int, noise: float = 0.0, offsets=None, flat: int = 0):
     """Markers of ``hand`` wearing han19 over a random motion: (poses, observed)."""
-    rng = np.random.default_rng(seed)
-    poses = generate_motion(rng, frames, 120.0)
-    poses[:flat, 6:] = FLAT
-    binding = HAN19.place(hand)[0] if offsets is None else _offset(HAN19.place(hand)[0], offsets)
-    markers = blend(*hand.skinning_transforms(poses), binding)
-    return poses, markers + rng.normal(0.0, noise, markers.shape)
+    return marker_motion(HAN19, hand, frames, seed, noise, offsets, flat)
 
 
 @pytest.mark.parametrize("side", ["left", "right"])

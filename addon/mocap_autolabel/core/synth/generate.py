@@ -371,3 +371,30 @@ def corrupt_take(markers: np.ndarray, rate: float, seed: int, cfg: TakeCorruptio
     take = Take(positions=positions, names=[f"*{i}" for i in range(positions.shape[1])], rate=rate,
                 source_units="mm", vendor="mocap_autolabel corrupt_take")
     return take, truth_slots, facts
+
+
+#: Joint angles (20,) of the flat hand that range-of-motion takes start with, radians.
+FLAT_HAND = np.radians([0, 20, 0, 0] + [0] * 16)
+
+
+def marker_motion(layout: Layout, hand: HandModel, frames: int, seed: int, noise: float = 0.0,
+                  offsets: np.ndarray | None = None, flat_frames: int = 0,
+                  rate: float = 120.0) -> tuple[np.ndarray, np.ndarray]:
+    """A labeled marker track of ``hand`` moving at random: what IK and calibration are checked on.
+
+    Args:
+        offsets: ``(M, 3)`` marker displacements from the layout positions (rest hand frame, metres).
+        flat_frames: the motion starts with this many frames of :data:`FLAT_HAND`.
+        noise: standard deviation per axis, metres.
+
+    Returns:
+        poses ``(F, 26)`` and markers ``(F, M, 3)`` in layout order, metres.
+    """
+    rng = np.random.default_rng(seed)
+    poses = generate_motion(rng, frames, rate)
+    poses[:flat_frames, 6:] = FLAT_HAND
+    binding = layout.place(hand)[0]
+    if offsets is not None:
+        binding = Binding(binding.rest + offsets, binding.bones, binding.weights)
+    markers = blend(*hand.skinning_transforms(poses), binding)
+    return poses, markers + rng.normal(0.0, noise, markers.shape) if noise > 0 else markers
