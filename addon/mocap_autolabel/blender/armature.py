@@ -172,3 +172,66 @@ def build_solved_hand(solved, collection: bpy.types.Collection | None = None, na
     arm["mocap_marker_rms_mm"] = solved.fit.overall_rms() * 1000
     key_poses(arm, hand, solved.fit.poses, first_frame=solved.first_frame)
     return arm
+
+
+def drive_armature(target: bpy.types.Object, hand: HandModel, poses: np.ndarray, bone_map: dict[str, str],
+                   first_frame: int = 1) -> None:
+    """Key a user's own hand armature with ``poses (F, 26)`` through ``bone_map`` (our bone -> theirs).
+
+    Each mapped bone turns, in the world, exactly as our bone turns from its rest (so other rest
+    orientations and bone rolls do not matter); unmapped bones ride along with their parent; the
+    mapped root bone's head follows our wrist from its own rest place. Keys are written in bulk,
+    frames with a NaN pose get none.
+    """
+    unknown = [b for b in bone_map if b not in BONE_NAMES]
+    missing = [t for t in bone_map.values() if t not in target.data.bones]
+    if unknown or missing:
+        raise ValueError(f"bone map: unknown hand bones {unknown}, bones missing in {target.name!r}: {missing}")
+    poses = np.asarray(poses, dtype=float)
+    solved = np.isfinite(poses).all(axis=1)
+    poses = poses[solved]
+    frames = np.arange(first_frame, first_frame + len(solved), dtype=np.float64)[solved]
+    if not len(poses):
+        return
+    skin_r, skin_t = hand.skinning_transforms(poses)  # (F, 20, 3, 3) rest -> posed, hand frame = world
+    world = np.array(target.matrix_world)
+    a = world[:3, :3] / np.linalg.norm(world[:3, :3], axis=0)  # the target object's rotation
+    ours = {t: BONE_NAMES.index(b) for b, t in bone_map.items()}
+    bones = list(target.data.bones)  # parents come before children
+    rest = {b.name: np.array(b.matrix_local) for b in bones}
+    posed: dict[str, np.ndarray] = {}
+    bases: dict[str, np.ndarray] = {}
+    n = len(poses)
+    for bone in bones:
+        r = rest[bone.name]
+        parent = bone.parent.name if bone.parent else None
+        m = np.empty((n, 4, 4))
+        if parent is None:
+            m[:] = r
+        else:
+            m[:] = posed[parent] @ (np.linalg.inv(rest[parent]) @ r)
+        if bone.name in ours:
+            change = a.T @ skin_r[:, ours[bone.name]] @ a  # our bone's turn, in the target's space
+            m[:, :3, :3] = change @ r[:3, :3]
+            if parent is None:
+                wrist = (a.T @ poses[:, 3:6, None])[..., 0] / np.linalg.norm(world[:3, :3], axis=0)
+                m[:, :3, 3] = r[:3, 3] + wrist
+        posed[bone.name] = m
+        if parent is None:
+            bases[bone.name] = np.linalg.inv(r) @ m
+        else:
+            bases[bone.name] = np.linalg.inv(r) @ rest[parent] @ np.linalg.inv(posed[parent]) @ m
+            bases[bone.name][:, :3, 3] = 0.0  # heads follow the hierarchy
+    animio.ensure_action(target, f"{target.name}Action")
+    for bone in bones:
+        pb = target.pose.bones[bone.name]
+        pb.rotation_mode = "QUATERNION"
+        quats = continuous_quaternions(matrix_to_quaternion(bases[bone.name][:, :3, :3]), axis=0)
+        path = f'pose.bones["{bone.name}"]'
+        channels = [("rotation_quaternion", i, quats[:, i]) for i in range(4)]
+        if bone.parent is None:
+            channels += [("location", i, bases[bone.name][:, i, 3]) for i in range(3)]
+        for prop, i, values in channels:
+            fc = animio.find_fcurve(target, f"{path}.{prop}", i) or animio.new_fcurve(
+                target, f"{path}.{prop}", i, group=bone.name)
+            animio.write_keys(fc, frames, values)
