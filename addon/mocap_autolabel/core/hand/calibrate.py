@@ -63,7 +63,7 @@ class Calibration:
     def binding(self, layout: Layout) -> Binding:
         """The markers of ``layout`` on this hand, offsets applied."""
         self.check(layout)
-        return _offset(layout.place(self.hand())[0], self.offsets)
+        return layout.place(self.hand())[0].moved(self.offsets)
 
     def solver(self, layout: Layout, **kwargs) -> HandSolver:
         return HandSolver(self.hand(), self.binding(layout), **kwargs)
@@ -108,10 +108,6 @@ class Calibration:
         except (KeyError, TypeError, ValueError) as exc:
             raise MocapInputError(where, f"not a valid calibration ({exc})") from None
         return out
-
-
-def _offset(binding: Binding, offsets: np.ndarray) -> Binding:
-    return Binding(binding.rest + offsets, binding.bones, binding.weights)
 
 
 def detect_side(observed: np.ndarray, layout: Layout, hand: HandModel | None = None, sample: int = 24) -> str:
@@ -211,7 +207,7 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
 
     def model(size: np.ndarray, offsets: np.ndarray) -> HandSolver:
         h = HandModel(float(hand.length * np.exp(size[0])), float(hand.breadth * np.exp(size[1])), side)
-        return HandSolver(h, _offset(layout.place(h)[0], offsets))
+        return HandSolver(h, layout.place(h)[0].moved(offsets))
 
     def residuals(p: np.ndarray, size: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, float]:
         data = (model(size, offsets).markers(p) - obs0) * w

@@ -37,6 +37,10 @@ class Binding:
     bones: np.ndarray
     weights: np.ndarray
 
+    def moved(self, offsets: np.ndarray) -> Binding:
+        """The same points displaced by ``offsets (N, 3)`` at rest (hand frame, metres)."""
+        return Binding(self.rest + offsets, self.bones, self.weights)
+
 
 def segment_weights(bone: np.ndarray, along: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Bones and weights of points at fraction ``along`` (0 = proximal joint, 1 = distal) of ``bone``.

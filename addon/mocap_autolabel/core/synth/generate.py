@@ -190,7 +190,7 @@ def _slip(rng: np.random.Generator, binding: Binding, normals: np.ndarray, slip:
     d -= np.sum(d * normals, axis=1, keepdims=True) * normals  # tangent to the skin
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     amount = rng.uniform(*slip, size=(len(normals), 1))
-    return Binding(binding.rest + d * amount, binding.bones, binding.weights)
+    return binding.moved(d * amount)
 
 
 def _pack(rng: np.random.Generator, tracks: np.ndarray, track_labels: np.ndarray,
@@ -395,6 +395,6 @@ def marker_motion(layout: Layout, hand: HandModel, frames: int, seed: int, noise
     poses[:flat_frames, 6:] = FLAT_HAND
     binding = layout.place(hand)[0]
     if offsets is not None:
-        binding = Binding(binding.rest + offsets, binding.bones, binding.weights)
+        binding = binding.moved(offsets)
     markers = blend(*hand.skinning_transforms(poses), binding)
     return poses, markers + rng.normal(0.0, noise, markers.shape) if noise > 0 else markers
