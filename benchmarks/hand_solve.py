@@ -26,10 +26,6 @@ from mocap_autolabel.core.synth.generate import marker_motion  # noqa: E402
 REPORT = os.path.join(os.path.dirname(__file__), "reports", "hand_solve.md")
 
 
-def synthetic(layout, hand, frames, seed, noise, offsets=None, flat=0):
-    return marker_motion(layout, hand, frames, seed, noise, offsets, flat)
-
-
 def joint_errors(args, lines):
     lines += ["## Joint angles on synthetic takes (1 mm noise per axis, known hand)", "",
               "Error of the 20 joint angles against the truth, every frame; `raw` is each frame's own fit, "
@@ -41,7 +37,7 @@ def joint_errors(args, lines):
         raw_err, smooth_err, rms, fps = [], [], [], []
         for seed in range(2 if args.quick else 4):
             hand = HandModel(side="left" if seed % 2 else "right")
-            poses, observed = synthetic(layout, hand, 3000, seed, 0.001)
+            poses, observed = marker_motion(layout, hand, 3000, seed, 0.001)
             solver = HandSolver(hand, layout.place(hand)[0])
             raw = solver.solve(observed)
             t = time.perf_counter()
@@ -62,7 +58,7 @@ def joint_errors(args, lines):
 def speed(args, lines):
     layout = load_layout("han19")
     hand = HandModel(side="right")
-    _, observed = synthetic(layout, hand, 10_000, 42, 0.001)
+    _, observed = marker_motion(layout, hand, 10_000, 42, 0.001)
     solver = HandSolver(hand, layout.place(hand)[0])
     rows = []
     for label, rate in (("per-frame fit", None), ("with smoothing (default)", 120.0)):
@@ -83,11 +79,12 @@ def calibration(args, lines):
     layout = load_layout("han19")
     lines += ["## Calibration recovery (synthetic, han19, 2,400 frames, 0.5 mm noise)", "",
               "Offsets: every marker moved 10 mm in a random direction. Length: the hand 10 % longer than the "
-              "starting hand. `flat` = the take starts with 0.5 s of flat hand given as reference frames.", "",
+              "starting hand. `flat` = the take starts with 0.5 s of flat hand given as reference frames; "
+              "`pinch` = 32 frames where the thumb pad touches a finger pad, given as contacts.", "",
               "| perturbation | reference | seed | length error | max offset error mm | mean offset error mm | "
               "RMS before -> after mm | seconds |", "|---|---|---|---|---|---|---|---|"]
     for kind in ("offsets", "length", "both"):
-        for reference in (True, False):
+        for reference in ("flat", "pinch", "none"):
             for seed in range(1 if args.quick else 2):
                 rng = np.random.default_rng(100 + seed)
                 side = "left" if seed else "right"
@@ -97,12 +94,16 @@ def calibration(args, lines):
                 offsets *= 0.010 / np.linalg.norm(offsets, axis=1, keepdims=True)
                 if kind == "length":
                     offsets[:] = 0
-                _, observed = synthetic(layout, true, 2400, 100 + seed, 0.0005, offsets, flat=60)
+                fingers = ("index", "middle", "ring", "little")
+                pinches = [(100 + 37 * i, fingers[i % 4]) for i in range(32)] if reference == "pinch" else []
+                _, observed = marker_motion(layout, true, 2400, 100 + seed, 0.0005, offsets,
+                                            flat_frames=60 if reference == "flat" else 0, pinches=pinches)
                 t = time.perf_counter()
-                cal = calibrate(observed, layout, hand=base, reference=np.arange(60) if reference else None)
+                cal = calibrate(observed, layout, hand=base, contacts=pinches,
+                                reference=np.arange(60) if reference == "flat" else None)
                 dt = time.perf_counter() - t
                 err = np.linalg.norm(cal.offsets - offsets, axis=1) * 1000
-                lines.append(f"| {kind} | {'flat' if reference else 'none'} | {seed} | "
+                lines.append(f"| {kind} | {reference} | {seed} | "
                              f"{100 * (cal.length / true.length - 1):+.2f} % | {err.max():.2f} | {err.mean():.2f} | "
                              f"{cal.rms_before * 1000:.2f} -> {cal.rms_after * 1000:.2f} | {dt:.1f} |")
                 print(lines[-1], flush=True)

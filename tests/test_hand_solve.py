@@ -136,3 +136,24 @@ def test_real_glove_fits_within_three_millimetres_after_calibration():
     after = cal.solver(layout).solve(observed[half:], rate=take.rate)  # held-out half
     assert after.overall_rms() < 0.003
     assert after.overall_rms() < 0.5 * before.overall_rms()
+
+
+def test_pinch_contacts_settle_what_the_markers_leave_open():
+    """Without a reference pose, tip offsets along their arc are a guess; pinch contacts measure them."""
+    base = HandModel(side="left")
+    true = HandModel(base.length * 1.1, base.breadth, "left")
+    rng = np.random.default_rng(101)
+    offsets = rng.normal(size=(len(HAN19), 3))
+    offsets *= 0.010 / np.linalg.norm(offsets, axis=1, keepdims=True)
+    fingers = ("index", "middle", "ring", "little")
+    pinches = [(100 + 37 * i, fingers[i % 4]) for i in range(32)]
+    _, observed = marker_motion(HAN19, true, 2400, 101, 0.0005, offsets, pinches=pinches)
+    plain = calibrate(observed, HAN19, hand=base)
+    touched = calibrate(observed, HAN19, hand=base, contacts=pinches)
+    err_plain = np.linalg.norm(plain.offsets - offsets, axis=1)
+    err_touched = np.linalg.norm(touched.offsets - offsets, axis=1)
+    assert err_touched.max() < 0.5 * err_plain.max() and err_touched.max() < 0.002
+    assert touched.contact_gap < 0.005 and set(touched.contacts) == {"thumb", *fingers}
+    assert abs(touched.length / true.length - 1) < 0.02
+    with pytest.raises(ValueError, match="fingers"):
+        calibrate(observed, HAN19, hand=base, contacts=[(5, "thumb")])

@@ -97,6 +97,9 @@ def build_parser() -> argparse.ArgumentParser:
     sol.add_argument("--reference-frames", metavar="A:B",
                      help="frames A to B-1 (0-based) hold a flat hand: calibration then also measures the "
                           "marker offsets that a joint-angle bias would otherwise absorb")
+    sol.add_argument("--contacts", metavar="FRAME:FINGER,...",
+                     help="pinch frames (0-based) for the calibration, e.g. 120:index,300:middle: there the "
+                          "thumb's pad touches that finger's pad")
     sol.add_argument("--side", choices=("left", "right"), help="hand side (default: detected)")
     sol.add_argument("--smooth-hz", type=float, default=10.0, help="low-pass cut-off of the pose track (0: off)")
     sol.add_argument("--report", metavar="REPORT.json", help="per-frame and overall marker RMS (mm), calibration")
@@ -325,6 +328,14 @@ def _solve(args) -> int:
                   f"got {args.reference_frames!r}", file=sys.stderr)
             return EXIT_USAGE
         reference = range(a, b)
+    contacts = []
+    for item in filter(None, (args.contacts or "").split(",")):
+        frame, _, finger = item.partition(":")
+        if not frame.strip().isdigit() or finger.strip() not in ("index", "middle", "ring", "little"):
+            print(f"mocap_autolabel solve: error: --contacts takes FRAME:FINGER items (finger index, middle, ring "
+                  f"or little), got {item!r}", file=sys.stderr)
+            return EXIT_USAGE
+        contacts.append((int(frame), finger.strip()))
     bpy = None
     if args.blend or args.fbx or args.bvh:
         bpy = _bpy_or_none("solve --blend/--fbx/--bvh")
@@ -337,7 +348,7 @@ def _solve(args) -> int:
         if reference is not None and reference.stop > take.n_frames:
             raise MocapInputError(args.file, f"has {take.n_frames} frames; --reference-frames ends at {reference.stop}")
         solved = solve_take(take, layout, calibration=calibration, calibrate_seconds=args.calibrate_seconds,
-                            reference=reference, side=args.side, smooth_hz=args.smooth_hz)
+                            reference=reference, contacts=contacts, side=args.side, smooth_hz=args.smooth_hz)
     except Exception as exc:
         return _fail(args.file, exc)
     report = solved.report() | {"file": args.file}

@@ -286,7 +286,8 @@ class HandSolve:
 
 def solve_take(take: Take, layout: Layout, calibration: Calibration | None = None,
                calibrate_seconds: float | None = None, reference: Sequence[int] | None = None,
-               side: str | None = None, smooth_hz: float = 10.0) -> HandSolve:
+               contacts: Sequence[tuple[int, str]] = (), side: str | None = None,
+               smooth_hz: float = 10.0) -> HandSolve:
     """Fit the hand to a labeled take: calibrate (unless given a calibration), then solve every frame.
 
     Args:
@@ -295,6 +296,7 @@ def solve_take(take: Take, layout: Layout, calibration: Calibration | None = Non
         calibration: a performer's calibration to reuse; None calibrates on this take.
         calibrate_seconds: calibrate on the take's first seconds only (default: all of it).
         reference: frames (0-based) in which the hand is flat (see :func:`calibrate`).
+        contacts: pinch frames ``(frame, finger)`` for the calibration (see :func:`calibrate`).
         side: ``left``/``right``; detected from the markers when None.
         smooth_hz: low-pass cut-off for the pose track (0: none).
     """
@@ -305,7 +307,11 @@ def solve_take(take: Take, layout: Layout, calibration: Calibration | None = Non
     start = time.perf_counter()
     if calibration is None:
         stop = len(observed) if calibrate_seconds is None else max(1, int(round(calibrate_seconds * take.rate)))
-        calibration = calibrate(observed[:stop], layout, side=side,
+        bad = [f for f, _ in contacts if not 0 <= f < stop]
+        if bad:
+            raise MocapInputError(take.source, f"pinch frames {bad[:5]} lie outside the calibration frames "
+                                               f"0-{stop - 1}")
+        calibration = calibrate(observed[:stop], layout, side=side, contacts=contacts,
                                 reference=None if reference is None else np.asarray(reference))
     else:
         calibration.check(layout, "calibration")

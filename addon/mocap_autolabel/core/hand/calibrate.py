@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,12 +26,14 @@ from ..atomic import atomic_output
 from ..errors import MocapInputError
 from ..layout import Layout
 from .ik import MIN_MARKERS, HandSolver
-from .skeleton import N_DOF, POSE_LIMITS, HandModel
-from .skin import Binding
+from .skeleton import BONE_INDEX, DIGITS, FINGERS, N_DOF, POSE_LIMITS, HandModel
+from .skin import Binding, segment_weights, skin_point
 
 #: Cost of moving a marker along its skin normal, and along the skin (METHODS.md B).
 ALPHA_NORMAL, ALPHA_TANGENT = 2.0, 1.0
 FORMAT = "mocap_autolabel.calibration/1"
+#: A pinch frame whose pads stay further apart than this after a round is left out, metres.
+CONTACT_DROP = 0.010
 
 
 @dataclass
@@ -45,6 +48,10 @@ class Calibration:
         offsets: ``(M, 3)`` each marker's offset from its layout position, rest hand frame, metres.
         rms_before, rms_after: marker RMS of the calibration frames before and after, metres.
         frames: the take frames (0-based) it was solved on.
+        contacts: per digit, its contact pad on the distal phalanx: [along (fraction of the bone),
+            angle around it (degrees, 180 = palmar)], when pinch frames were given.
+        contact_gap: largest thumb-to-finger pad distance left in the pinch frames, metres.
+        contacts_dropped: pinch frames left out because their gap stayed over ``CONTACT_DROP``.
     """
 
     layout: str
@@ -56,6 +63,9 @@ class Calibration:
     rms_before: float = float("nan")
     rms_after: float = float("nan")
     frames: list[int] = field(default_factory=list)
+    contacts: dict[str, list[float]] = field(default_factory=dict)
+    contact_gap: float = float("nan")
+    contacts_dropped: int = 0
 
     def hand(self) -> HandModel:
         return HandModel(length=self.length, breadth=self.breadth, side=self.side)
@@ -79,7 +89,9 @@ class Calibration:
                 "hand_length_mm": round(self.length * 1000, 4), "hand_breadth_mm": round(self.breadth * 1000, 4),
                 "markers": {n: [round(v * 1000, 4) for v in o] for n, o in zip(self.names, self.offsets)},
                 "rms_before_mm": round(self.rms_before * 1000, 4), "rms_after_mm": round(self.rms_after * 1000, 4),
-                "frames": [int(f) for f in self.frames]}
+                "frames": [int(f) for f in self.frames], "contacts": self.contacts,
+                "contact_gap_mm": round(self.contact_gap * 1000, 4) if np.isfinite(self.contact_gap) else None,
+                "contacts_dropped": self.contacts_dropped}
 
     def save(self, path: str | os.PathLike) -> None:
         with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
@@ -103,7 +115,9 @@ class Calibration:
             offsets = np.array([data["markers"][n] for n in names], dtype=float).reshape(len(names), 3) / 1000
             out = cls(str(data["layout"]), names, str(data["side"]), float(data["hand_length_mm"]) / 1000,
                       float(data["hand_breadth_mm"]) / 1000, offsets, float(data.get("rms_before_mm", "nan")) / 1000,
-                      float(data.get("rms_after_mm", "nan")) / 1000, list(data.get("frames", [])))
+                      float(data.get("rms_after_mm", "nan")) / 1000, list(data.get("frames", [])),
+                      dict(data.get("contacts", {})), float(data.get("contact_gap_mm") or "nan") / 1000,
+                      int(data.get("contacts_dropped", 0)))
             out.hand()  # validates the size and side
         except (KeyError, TypeError, ValueError) as exc:
             raise MocapInputError(where, f"not a valid calibration ({exc})") from None
@@ -148,7 +162,8 @@ def _diverse(angles: np.ndarray, count: int) -> np.ndarray:
 def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, hand: HandModel | None = None,
               frames: int = 40, prior: float = 0.0005, iterations: int = 60, rounds: int = 3,
               solve_size: bool = True, reference: np.ndarray | None = None,
-              reference_pose: np.ndarray | None = None) -> Calibration:
+              reference_pose: np.ndarray | None = None,
+              contacts: Sequence[tuple[int, str]] = (), contact_after: int = 10) -> Calibration:
     """Solve the performer's hand size and marker offsets from a labeled take.
 
     Args:
@@ -168,6 +183,12 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
             joint-angle bias explains equally well (a lone marker on a distal phalanx moving
             along its arc) is only settled by the prior; with one it is measured.
         reference_pose: the joint angles ``(20,)`` radians of that pose (default: flat hand).
+        contacts: pinch frames, ``(frame, finger)`` with the finger one of index, middle, ring,
+            little: in that frame the thumb's pad touches the finger's pad. Each pad is a contact
+            point that slides on its distal phalanx's skin (along the bone and around it), solved
+            with the rest; the contact term pulls the two together (METHODS.md B, E_contact). Like a
+            reference pose, it measures what a joint-angle bias would otherwise absorb.
+        contact_after: iterations before the contact term switches on (the paper: 10).
     """
     observed = np.asarray(observed, dtype=float)
     if observed.ndim != 3 or observed.shape[1] != len(layout) or observed.shape[2] != 3:
@@ -195,6 +216,20 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
         picked = np.concatenate([ref, picked])
         poses = np.concatenate([ref_poses, poses])
         pinned = np.concatenate([np.ones(len(ref), dtype=bool), pinned])
+    digits = sorted({"thumb"} | {f for _, f in contacts}, key=DIGITS.index) if contacts else []
+    pairs = np.zeros((0, 3), dtype=int)  # (row in picked, thumb's pad, finger's pad)
+    if contacts:
+        bad = [f for _, f in contacts if f not in FINGERS]
+        if bad:
+            raise ValueError(f"contacts name fingers {bad}; fingers are {', '.join(FINGERS)}")
+        frames_c = np.array([f for f, _ in contacts], dtype=int)
+        new = np.setdiff1d(frames_c, picked)
+        if len(new):
+            picked = np.concatenate([picked, new])
+            poses = np.concatenate([poses, HandSolver(hand, placed).cold_start(observed[new])])
+            pinned = np.concatenate([pinned, np.zeros(len(new), dtype=bool)])
+        row = {int(f): i for i, f in enumerate(picked)}
+        pairs = np.array([(row[int(f)], 0, digits.index(d)) for f, d in contacts], dtype=int)
     obs = observed[picked]
     seen = np.isfinite(obs).all(axis=-1)
     w = seen[..., None].astype(float)
@@ -205,38 +240,65 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
     nn = normals[:, :, None] * normals[:, None, :]
     prior_mat = np.sqrt(weight) * (np.sqrt(ALPHA_NORMAL) * nn + np.sqrt(ALPHA_TANGENT) * (np.eye(3) - nn))
 
+    def sized(size: np.ndarray) -> HandModel:
+        return HandModel(float(hand.length * np.exp(size[0])), float(hand.breadth * np.exp(size[1])), side)
+
     def model(size: np.ndarray, offsets: np.ndarray) -> HandSolver:
-        h = HandModel(float(hand.length * np.exp(size[0])), float(hand.breadth * np.exp(size[1])), side)
+        h = sized(size)
         return HandSolver(h, layout.place(h)[0].moved(offsets))
 
-    def residuals(p: np.ndarray, size: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, float]:
+    def gaps(p: np.ndarray, size: np.ndarray, pads: np.ndarray) -> np.ndarray:
+        """``(C, 3)`` thumb pad minus finger pad in each pinch frame, metres."""
+        h = sized(size)
+        at = HandSolver(h, _pads(h, digits, pads)).markers(p[pairs[:, 0]])
+        return at[np.arange(len(pairs)), pairs[:, 1]] - at[np.arange(len(pairs)), pairs[:, 2]]
+
+    def residuals(p: np.ndarray, size: np.ndarray, offsets: np.ndarray, pads: np.ndarray,
+                  touching: bool) -> tuple[np.ndarray, float]:
         data = (model(size, offsets).markers(p) - obs0) * w
         pri = (prior_mat @ offsets[:, :, None])[..., 0]
-        return data, float((data ** 2).sum() + (pri ** 2).sum())
+        cost = float((data ** 2).sum() + (pri ** 2).sum())
+        if touching and len(pairs):
+            cost += float((gaps(p, size, pads) ** 2).sum())
+        return data, cost
 
     size, offsets = np.zeros(2), np.zeros((m, 3))
+    pads = np.tile([0.6, np.pi], len(digits))  # (along, angle) per digit: the palmar pad
     n_size = 2 if solve_size else 0
     n_pose = k * N_DOF
-    n_par = n_pose + 3 * m + n_size
-    _, cost = residuals(poses, size, offsets)
+    n_pad = len(pads)
+    n_par = n_pose + 3 * m + n_size + n_pad
+    touching = False
+    dropped = 0
+    _, cost = residuals(poses, size, offsets, pads, touching)
     rms_before = float(np.sqrt(((model(size, offsets).markers(poses) - obs0) ** 2 * w).sum() / seen.sum()))
     lo, hi = POSE_LIMITS
     for round_ in range(rounds):
+        if round_ and touching and len(pairs):
+            # A pinch frame whose pose fell into another basin cannot close its gap and would bend
+            # the calibration towards it: drop its contact (the markers still count).
+            keep = np.linalg.norm(gaps(poses, size, pads), axis=1) <= CONTACT_DROP
+            dropped += int((~keep).sum())
+            pairs = pairs[keep]
         if round_:
             # The poses were first fitted with the uncalibrated markers; some may sit in a wrong
             # basin that the offsets then bend towards. Refit each frame from scratch too.
             solver = model(size, offsets)
             fresh = solver.cold_start(obs)
             better = (solver.evaluate(fresh, obs).rms < solver.evaluate(poses, obs).rms) & ~pinned
+            better[pairs[:, 0]] &= not touching  # a pinch frame's pose answers to its contact too
             poses = np.where(better[:, None], fresh, poses)
-            _, cost = residuals(poses, size, offsets)
+            _, cost = residuals(poses, size, offsets, pads, touching)
         lam = 1e-3
-        for _ in range(iterations // rounds):
+        for it in range(iterations // rounds):
+            if not touching and len(pairs) and round_ * (iterations // rounds) + it >= contact_after:
+                touching = True
+                _, cost = residuals(poses, size, offsets, pads, touching)
             solver = model(size, offsets)
             pred, jac_pose = solver.jacobian(poses)  # (K, M, 3), (K, M, 3, 26)
             r = (pred - obs0) * w
             rows = k * m * 3
-            jac = np.zeros((rows + 3 * m, n_par))
+            jac = np.zeros((rows + 3 * m + 3 * len(pairs), n_par))
             jp = (jac_pose * w[..., None]).reshape(k, m * 3, N_DOF)
             for f in range(k):
                 jac[f * m * 3:(f + 1) * m * 3, f * N_DOF:(f + 1) * N_DOF] = jp[f]
@@ -248,13 +310,27 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
             blended = blended * w[..., None]  # (K, M, 3, 3)
             for j in range(m):
                 jac[:rows, n_pose + 3 * j:n_pose + 3 * j + 3] = _scatter_rows(blended[:, j], k, m, j)
-            jac[rows:, n_pose:n_pose + 3 * m] = _block_diag(prior_mat)
+            jac[rows:rows + 3 * m, n_pose:n_pose + 3 * m] = _block_diag(prior_mat)
+            con = gaps(poses, size, pads) if touching else np.zeros((len(pairs), 3))
             for i in range(n_size):  # hand length and breadth by finite differences
                 h = np.zeros(2)
                 h[i] = 1e-4
                 moved = (model(size + h, offsets).markers(poses) - obs0) * w
                 jac[:rows, n_pose + 3 * m + i] = ((moved - r) / 1e-4).ravel()
-            res = np.concatenate([r.ravel(), (prior_mat @ offsets[:, :, None]).ravel()])
+                if touching:
+                    jac[rows + 3 * m:, n_pose + 3 * m + i] = ((gaps(poses, size + h, pads) - con) / 1e-4).ravel()
+            if touching:
+                h_ = sized(size)
+                _, jac_pad = HandSolver(h_, _pads(h_, digits, pads)).jacobian(poses[pairs[:, 0]])  # (C, D, 3, 26)
+                c = np.arange(len(pairs))
+                jgap = jac_pad[c, pairs[:, 1]] - jac_pad[c, pairs[:, 2]]  # (C, 3, 26)
+                for e, (row_, _, _) in enumerate(pairs):
+                    jac[rows + 3 * m + 3 * e:rows + 3 * m + 3 * e + 3, row_ * N_DOF:(row_ + 1) * N_DOF] = jgap[e]
+                for i in range(n_pad):  # pads slide on the skin: finite differences
+                    h = np.zeros(n_pad)
+                    h[i] = 1e-4
+                    jac[rows + 3 * m:, n_par - n_pad + i] = ((gaps(poses, size, pads + h) - con) / 1e-4).ravel()
+            res = np.concatenate([r.ravel(), (prior_mat @ offsets[:, :, None]).ravel(), con.ravel()])
             a = jac.T @ jac
             g = jac.T @ res
             a[np.diag_indices_from(a)] += lam * np.diag(a) + 1e-12
@@ -268,17 +344,29 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
             cand_poses = HandSolver.step(poses, delta[:n_pose].reshape(k, N_DOF))
             cand_poses[:, 6:] = np.clip(cand_poses[:, 6:], lo[6:], hi[6:])
             cand_offsets = offsets + delta[n_pose:n_pose + 3 * m].reshape(m, 3)
-            cand_size = size + np.concatenate([delta[n_pose + 3 * m:], np.zeros(2 - n_size)])
-            _, cand_cost = residuals(cand_poses, cand_size, cand_offsets)
+            cand_size = size + np.concatenate([delta[n_pose + 3 * m:n_pose + 3 * m + n_size], np.zeros(2 - n_size)])
+            cand_pads = pads + delta[n_par - n_pad:]
+            cand_pads[0::2] = np.clip(cand_pads[0::2], 0.25, 1.0)  # stay on the distal phalanx
+            _, cand_cost = residuals(cand_poses, cand_size, cand_offsets, cand_pads, touching)
             if cand_cost < cost:
-                poses, offsets, size, cost = cand_poses, cand_offsets, cand_size, cand_cost
+                poses, offsets, size, pads, cost = cand_poses, cand_offsets, cand_size, cand_pads, cand_cost
                 lam = max(lam / 3, 1e-9)
             else:
                 lam = min(lam * 4, 1e9)
     final = model(size, offsets)
     rms_after = float(np.sqrt(((final.markers(poses) - obs0) ** 2 * w).sum() / seen.sum()))
+    contact = {d: [round(float(pads[2 * i]), 4), round(float(np.degrees(pads[2 * i + 1])), 2)]
+               for i, d in enumerate(digits)}
+    gap = float(np.linalg.norm(gaps(poses, size, pads), axis=1).max()) if len(pairs) else float("nan")
     return Calibration(layout.name, list(layout.names), side, final.hand.length, final.hand.breadth, offsets,
-                       rms_before, rms_after, [int(f) for f in picked])
+                       rms_before, rms_after, [int(f) for f in picked], contact, gap, dropped)
+
+
+def _pads(hand: HandModel, digits: list[str], pads: np.ndarray) -> Binding:
+    """Contact points on the skin of each digit's distal phalanx; ``pads`` holds (along, angle) pairs."""
+    bones = np.array([BONE_INDEX[f"{d}_dist"] for d in digits], dtype=np.int64)
+    rest = np.array([skin_point(hand, b, pads[2 * i], pads[2 * i + 1])[0] for i, b in enumerate(bones)])
+    return Binding(rest, *segment_weights(bones, pads[0::2]))
 
 
 def _refine_global(solver: HandSolver, poses: np.ndarray, observed: np.ndarray, iterations: int = 20) -> np.ndarray:

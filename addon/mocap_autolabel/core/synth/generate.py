@@ -12,6 +12,7 @@ import io
 import json
 import os
 import zipfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -378,14 +379,16 @@ FLAT_HAND = np.radians([0, 20, 0, 0] + [0] * 16)
 
 
 def marker_motion(layout: Layout, hand: HandModel, frames: int, seed: int, noise: float = 0.0,
-                  offsets: np.ndarray | None = None, flat_frames: int = 0,
-                  rate: float = 120.0) -> tuple[np.ndarray, np.ndarray]:
+                  offsets: np.ndarray | None = None, flat_frames: int = 0, rate: float = 120.0,
+                  pinches: Sequence[tuple[int, str]] = ()) -> tuple[np.ndarray, np.ndarray]:
     """A labeled marker track of ``hand`` moving at random: what IK and calibration are checked on.
 
     Args:
         offsets: ``(M, 3)`` marker displacements from the layout positions (rest hand frame, metres).
         flat_frames: the motion starts with this many frames of :data:`FLAT_HAND`.
         noise: standard deviation per axis, metres.
+        pinches: ``(frame, finger)``: that frame's pose is bent until the thumb's palmar pad
+            touches the finger's (:func:`pinch`).
 
     Returns:
         poses ``(F, 26)`` and markers ``(F, M, 3)`` in layout order, metres.
@@ -393,8 +396,30 @@ def marker_motion(layout: Layout, hand: HandModel, frames: int, seed: int, noise
     rng = np.random.default_rng(seed)
     poses = generate_motion(rng, frames, rate)
     poses[:flat_frames, 6:] = FLAT_HAND
+    for frame, finger in pinches:
+        poses[frame] = pinch(hand, poses[frame], finger)
     binding = layout.place(hand)[0]
     if offsets is not None:
         binding = binding.moved(offsets)
     markers = blend(*hand.skinning_transforms(poses), binding)
     return poses, markers + rng.normal(0.0, noise, markers.shape) if noise > 0 else markers
+
+
+def pinch(hand: HandModel, pose: np.ndarray, finger: str, steps: int = 40) -> np.ndarray:
+    """``pose (26,)`` bent (thumb and ``finger`` joints only) until the palmar pads of the thumb and
+    finger tips touch: pads at 60 % of each distal phalanx, on the skin."""
+    from ..hand.ik import HandSolver
+    from ..hand.skeleton import BONE_INDEX, JOINT_NAMES
+    from ..hand.skin import segment_weights, skin_point
+
+    bones = np.array([BONE_INDEX["thumb_dist"], BONE_INDEX[f"{finger}_dist"]])
+    rest = np.array([skin_point(hand, b, 0.6, np.pi)[0] for b in bones])
+    solver = HandSolver(hand, Binding(rest, *segment_weights(bones, np.full(2, 0.6))))
+    free = np.array([6 + i for i, n in enumerate(JOINT_NAMES) if n.startswith(("thumb", finger))])
+    out = np.array(pose, dtype=float)[None]
+    for _ in range(steps):
+        pads = solver.markers(out)[0]
+        target = np.repeat(pads.mean(axis=0, keepdims=True), 2, axis=0)[None]
+        moved = solver.refine(out, target, 3)[0]
+        out[:, free] = moved[:, free]  # only the two digits bend; the hand stays where it was
+    return out[0]
