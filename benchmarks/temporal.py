@@ -227,7 +227,9 @@ def write_report(results: dict, reliability: dict, speed: dict) -> None:
               f"- end to end (process start, read C3D, score, vote, write C3D): {speed['wall_s']:.2f} s, "
               f"{speed['fps_wall']:,.0f} frames/s",
               f"- of which interpreter and imports: {speed['startup_s']:.2f} s; without them "
-              f"{speed['fps_without_startup']:,.0f} frames/s; `label_take` alone {speed['pipeline_s']:.2f} s", ""]
+              f"{speed['fps_without_startup']:,.0f} frames/s; `label_take` alone {speed['pipeline_s']:.2f} s", "",
+              "IK validation (`label_take(validate=True)`) on the same data: `benchmarks/validation.py`, "
+              "report in validation.md (it calibrates a hand per take, so it runs on every 4th han2018 take).", ""]
     (REPORTS / "temporal.md").write_text("\n".join(lines))
     reliability_plot(reliability, REPORTS / "temporal_reliability.png")
     print(f"wrote {REPORTS / 'temporal.md'}")
