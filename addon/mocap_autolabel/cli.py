@@ -104,6 +104,29 @@ def build_parser() -> argparse.ArgumentParser:
     sol.add_argument("--smooth-hz", type=float, default=10.0, help="low-pass cut-off of the pose track (0: off)")
     sol.add_argument("--report", metavar="REPORT.json", help="per-frame and overall marker RMS (mm), calibration")
 
+    bat = sub.add_parser("batch", help="label (and solve) folders of takes headless, with progress and reports")
+    bat.add_argument("inputs", nargs="+", metavar="INPUT", help="take files, folders (searched recursively) or globs")
+    bat.add_argument("-o", "--output", required=True, metavar="OUT_DIR", help="folder for outputs and the summary")
+    bat.add_argument("--config", metavar="SETTINGS.toml",
+                     help="settings file (the keys of the flags below, e.g. layout = \"han19\"); flags override it")
+    bat.add_argument("--layout", help="built-in layout name or a layout .toml (default han19)")
+    bat.add_argument("--model", metavar="MODEL.onnx", help="ONNX model (default: the shipped one)")
+    bat.add_argument("--method", choices=("set", "perm", "cnn", "nearest"), help="per-frame labeler (default set)")
+    bat.add_argument("--temporal", choices=("vote", "viterbi", "none"), help="temporal mode (default vote)")
+    bat.add_argument("--validate", action="store_true", default=None, help="IK validation of the labels")
+    bat.add_argument("--confident", type=float, help="confidence counted as confident in reports (default 0.95)")
+    bat.add_argument("--solve-hand", action="store_true", default=None, help="also fit the hand; RMS in the report")
+    bat.add_argument("--calibration", metavar="CALIB.json", help="performer calibration for every take")
+    bat.add_argument("--blend", action="store_true", default=None,
+                     help="also write a .blend per take (solves the hand)")
+    bat.add_argument("--fbx", action="store_true", default=None, help="also write an FBX per take (solves the hand)")
+    bat.add_argument("--bvh", action="store_true", default=None, help="also write a BVH per take (solves the hand)")
+    bat.add_argument("--jobs", type=int, help="takes processed side by side (default 1)")
+    bat.add_argument("--force", action="store_true", default=None, help="redo takes whose outputs are complete")
+    shown = bat.add_mutually_exclusive_group()
+    shown.add_argument("--quiet", action="store_true", help="no progress, only the summary and errors")
+    shown.add_argument("--json-progress", action="store_true", help="progress as JSON lines on stderr (farm logs)")
+
     trn = sub.add_parser("train", help="train a 'set' model for a marker layout from synthetic data (needs PyTorch)")
     trn.add_argument("--layout", required=True, help="built-in layout name or a layout .toml")
     trn.add_argument("-o", "--output", required=True, metavar="OUT.onnx", help="the model; its card goes beside it")
@@ -134,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mocap_autolabel train: error: -o must name a .onnx file, got {args.output!r}", file=sys.stderr)
         return EXIT_USAGE
     command = {"info": _info, "import": _import, "synth": _synth, "label": _label, "solve": _solve,
-               "train": _train}[args.command]
+               "batch": _batch, "train": _train}[args.command]
     return command(args)
 
 
@@ -398,6 +421,52 @@ def _solve_outputs(bpy, take, solved, args) -> None:
     if args.bvh:
         export_bvh(arm, args.bvh, first, last)
         print(f"  bvh      {args.bvh}")
+
+
+def _batch(args) -> int:
+    from .batch import BatchSettings, find_takes, format_table, run_batch
+
+    try:
+        settings = BatchSettings.from_toml(args.config) if args.config else BatchSettings()
+    except (ValueError, TypeError) as exc:
+        print(f"mocap_autolabel batch: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    for key in ("layout", "model", "method", "temporal", "validate", "confident", "solve_hand", "calibration",
+                "blend", "fbx", "bvh", "jobs", "force"):
+        value = getattr(args, key)
+        if value is not None:
+            setattr(settings, key, value)
+    if not 1 <= settings.jobs <= 64:
+        print("mocap_autolabel batch: error: --jobs must be 1 to 64", file=sys.stderr)
+        return EXIT_USAGE
+    if settings.validate and settings.temporal != "vote":
+        print("mocap_autolabel batch: error: --validate needs --temporal vote", file=sys.stderr)
+        return EXIT_USAGE
+    if settings.needs_blender():
+        bpy = _bpy_or_none("batch --blend/--fbx/--bvh")
+        if bpy is None:
+            return EXIT_FAILED
+        if bpy.app.binary_path and settings.jobs > 1:  # inside Blender: workers would lack bpy
+            print("  note     inside Blender, --blend/--fbx/--bvh run with one job", file=sys.stderr)
+            settings.jobs = 1
+    try:
+        from .core.layout import load_layout
+
+        load_layout(settings.layout)
+    except Exception as exc:
+        return _fail(settings.layout, exc)
+    missing = [i for i in args.inputs if not any(ch in i for ch in "*?[") and not os.path.exists(i)]
+    if missing:
+        print(f"mocap_autolabel batch: error: no such file or folder: {', '.join(missing)}", file=sys.stderr)
+        return EXIT_USAGE
+    if not find_takes(args.inputs):
+        print(f"mocap_autolabel batch: error: no takes (.c3d, .trc, .tsv) in {' '.join(args.inputs)}", file=sys.stderr)
+        return EXIT_USAGE
+    progress = "none" if args.quiet else "json" if args.json_progress else "bar"
+    summary = run_batch(args.inputs, args.output, settings, progress)
+    print(format_table(summary))
+    print(f"  summary  {os.path.join(args.output, 'summary.csv')}, {os.path.join(args.output, 'summary.json')}")
+    return EXIT_FAILED if summary["failed"] else EXIT_OK
 
 
 def _train(args) -> int:

@@ -78,7 +78,8 @@ class OnnxLabeler(Labeler):
         options.log_severity_level = 3
         # One thread per run, and batches run side by side: these graphs are many small ops, which
         # parallelise better across batches than inside one.
-        self.workers = max(1, min(os.cpu_count() or 1, 8))
+        # MOCAP_AUTOLABEL_THREADS caps them where several processes share the cores (batch --jobs).
+        self.workers = max(1, min(int(os.environ.get("MOCAP_AUTOLABEL_THREADS") or os.cpu_count() or 1), 8))
         options.intra_op_num_threads = 1
         try:
             self.session = ort.InferenceSession(blob, options, providers=["CPUExecutionProvider"])

@@ -1,0 +1,431 @@
+"""Batch conversion: folders of takes, headless, with progress, reports and no lost work.
+
+``run_batch(inputs, out_dir, settings)`` labels every take (and optionally solves the hand and
+writes .blend / FBX) in up to ``jobs`` processes. Per take it writes, each atomically:
+``<name>.labeled.c3d`` and, last, ``<name>.report.json`` (the mark of a finished take: a rerun
+skips takes whose report and outputs exist, unless ``force``). A bad take is reported with its
+reason and skipped; the others go on. At the end ``summary.csv`` and ``summary.json``.
+
+Only the standard library at import time: the work happens in :func:`process_take`.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import glob
+import io
+import json
+import multiprocessing
+import os
+import sys
+import time
+import tomllib
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+
+TAKE_EXTENSIONS = (".c3d", ".trc", ".tsv")
+#: A hand is "found" when at least this share of frames has at least half the layout labeled.
+HAND_FRAMES = 0.3
+
+
+@dataclass
+class BatchSettings:
+    """Everything a batch run can be told; a TOML file holds the same keys (``[batch]`` table).
+
+    Attributes:
+        layout: built-in layout name or a layout .toml.
+        model: ONNX model for the labeler (default: the shipped one).
+        method, temporal: labeling method and temporal mode (as the ``label`` command).
+        validate: IK validation of the labels.
+        confident: confidence at or above which a segment counts as confident in the reports.
+        solve_hand: also fit the hand (calibrated on each take, or with ``calibration``).
+        calibration: a performer calibration .json to reuse for every take.
+        blend, fbx, bvh: also write these per take (need Blender or the bpy module).
+        jobs: takes processed side by side (processes).
+        force: redo takes whose outputs are already complete.
+    """
+
+    layout: str = "han19"
+    model: str | None = None
+    method: str = "set"
+    temporal: str = "vote"
+    validate: bool = False
+    confident: float = 0.95
+    solve_hand: bool = False
+    calibration: str | None = None
+    blend: bool = False
+    fbx: bool = False
+    bvh: bool = False
+    jobs: int = 1
+    force: bool = False
+    extra: dict = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def from_toml(cls, path: str) -> BatchSettings:
+        """Settings from a TOML file: top-level keys or a ``[batch]`` table; paths are relative to it."""
+        try:
+            with open(path, "rb") as f:
+                data = tomllib.load(f)
+        except FileNotFoundError:
+            raise ValueError(f"{path}: configuration file not found") from None
+        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{path}: not a readable TOML configuration ({exc})") from None
+        data = data.get("batch", data)
+        known = {f.name for f in dataclasses.fields(cls)} - {"extra"}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"{path}: unknown setting(s) {', '.join(sorted(unknown))}; known are "
+                             f"{', '.join(sorted(known))}")
+        base = os.path.dirname(os.path.abspath(path))
+        for key in ("model", "calibration"):
+            if data.get(key):
+                data[key] = os.path.join(base, data[key])
+        if str(data.get("layout", "")).endswith(".toml"):
+            data["layout"] = os.path.join(base, data["layout"])
+        return cls(**data)
+
+    def outputs(self) -> list[str]:
+        """Output suffixes every finished take has, besides its report."""
+        out = [".labeled.c3d"]
+        out += [s for s, on in ((".blend", self.blend), (".fbx", self.fbx), (".bvh", self.bvh)) if on]
+        return out
+
+    def needs_blender(self) -> bool:
+        return self.blend or self.fbx or self.bvh
+
+
+def find_takes(inputs: list[str]) -> list[tuple[str, str]]:
+    """``(path, output name)`` for every take in files, folders (recursively) and globs, sorted.
+
+    The output name keeps a folder input's sub-folders (``sub/take``), so equal file names in
+    different folders do not collide; remaining collisions get ``-2``, ``-3``...
+    """
+    found: list[tuple[str, str]] = []
+    for item in inputs:
+        if os.path.isdir(item):
+            for root, _, files in os.walk(item):
+                for name in sorted(files):
+                    if name.lower().endswith(TAKE_EXTENSIONS):
+                        path = os.path.join(root, name)
+                        found.append((path, os.path.splitext(os.path.relpath(path, item))[0]))
+        elif any(ch in item for ch in "*?["):
+            for path in sorted(glob.glob(item, recursive=True)):
+                if os.path.isfile(path):
+                    found.append((path, os.path.splitext(os.path.basename(path))[0]))
+        else:
+            found.append((item, os.path.splitext(os.path.basename(item))[0]))
+    unique: dict[str, tuple[str, str]] = {}
+    for path, name in found:  # a take named twice (folder and glob) is done once
+        unique.setdefault(os.path.abspath(path), (path, name))
+    seen: dict[str, int] = {}
+    out = []
+    for path, name in sorted(unique.values()):
+        n = seen.get(name, 0) + 1
+        seen[name] = n
+        out.append((path, name if n == 1 else f"{name}-{n}"))
+    return out
+
+
+def _finished(out_dir: str, name: str, settings: BatchSettings) -> bool:
+    report = os.path.join(out_dir, name + ".report.json")
+    if not os.path.isfile(report):
+        return False
+    try:
+        with open(report, encoding="utf-8") as f:
+            if json.load(f).get("status") != "ok":
+                return False
+    except (OSError, ValueError):
+        return False
+    return all(os.path.isfile(os.path.join(out_dir, name + s)) for s in settings.outputs())
+
+
+def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
+    """Label one take (and solve its hand) and write its outputs; never raises for a bad take.
+
+    Returns the report dict that was written (``status`` "ok" or "failed" with ``error``).
+    """
+    from .core.atomic import atomic_output
+    from .core.errors import MocapInputError
+
+    start = time.perf_counter()
+    report: dict = {"file": os.path.abspath(path), "name": name, "status": "failed"}
+    timings: dict = {}
+    try:
+        report.update(_work(path, name, out_dir, settings, timings))
+        report["status"] = "ok"
+    except MocapInputError as exc:
+        report["error"] = str(exc)
+    except Exception as exc:  # one bad take must not stop the batch
+        report["error"] = f"{path}: unexpected {type(exc).__name__}: {exc}"
+    timings["total"] = round(time.perf_counter() - start, 4)
+    report["seconds"] = timings
+    target = os.path.join(out_dir, name + ".report.json")
+    with atomic_output(target) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        json.dump(report, f, indent=1)
+    return report
+
+
+def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: dict) -> dict:
+    import numpy as np
+
+    from .core.errors import MocapInputError
+    from .core.formats.c3d import write_c3d
+    from .core.labeling import labeled_take
+    from .core.layout import load_layout
+    from .core.pipeline import label_take, solve_take
+    from .core.take import read_take
+
+    t = time.perf_counter()
+    layout = load_layout(settings.layout)
+    take = read_take(path)
+    timings["read"] = round(time.perf_counter() - t, 4)
+    hand_cal = None
+    if settings.calibration:
+        from .core.hand.calibrate import Calibration
+
+        hand_cal = Calibration.load(settings.calibration)
+        hand_cal.check(layout, settings.calibration)
+    t = time.perf_counter()
+    labeling = label_take(take, layout, method=settings.method, temporal=settings.temporal, model=settings.model,
+                          validate=settings.validate, hand=hand_cal)
+    timings["label"] = round(time.perf_counter() - t, 4)
+    labeled = labeled_take(take, labeling)
+    per_frame = np.isfinite(labeled.positions[:, :len(layout), 0]).sum(axis=1)
+    hand_frames = float((per_frame >= len(layout) / 2).mean()) if take.n_frames else 0.0
+    if hand_frames < HAND_FRAMES:
+        raise MocapInputError(path, f"no hand found: only {100 * hand_frames:.0f} % of frames have half of the "
+                                    f"{layout.name} markers labeled (is this a {layout.name} take?)")
+    out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
+           "hand_frames": round(hand_frames, 4), "summary": labeling.summary(settings.confident),
+           "outputs": {}}
+    t = time.perf_counter()
+    target = os.path.join(out_dir, name + ".labeled.c3d")
+    write_c3d(labeled, target)
+    out["outputs"]["labeled"] = os.path.basename(target)
+    timings["write"] = round(time.perf_counter() - t, 4)
+    if settings.solve_hand or settings.needs_blender():
+        t = time.perf_counter()
+        solved = solve_take(labeled, layout, calibration=hand_cal)
+        timings["solve"] = round(time.perf_counter() - t, 4)
+        rep = solved.report()
+        rep.pop("per_frame_rms_mm")
+        out["hand"] = rep
+        if settings.needs_blender():
+            t = time.perf_counter()
+            out["outputs"].update(_blender_outputs(labeled, solved, os.path.join(out_dir, name), settings))
+            timings["blender"] = round(time.perf_counter() - t, 4)
+    return out
+
+
+def _blender_outputs(take, solved, stem: str, settings: BatchSettings) -> dict:
+    import bpy
+
+    from .blender.armature import build_solved_hand
+    from .blender.export import export_bvh, export_fbx
+    from .blender.scene import ImportOptions, build_take
+    from .core.atomic import atomic_output
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    build_take(take, scene, ImportOptions())
+    collection = bpy.data.collections.new("Hand")
+    scene.collection.children.link(collection)
+    arm = build_solved_hand(solved, collection)
+    first, last = solved.first_frame, solved.first_frame + take.n_frames - 1
+    out = {}
+    if settings.blend:
+        with atomic_output(stem + ".blend") as tmp:
+            bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
+        out["blend"] = os.path.basename(stem + ".blend")
+    if settings.fbx:
+        export_fbx(arm, stem + ".fbx", first, last)
+        out["fbx"] = os.path.basename(stem + ".fbx")
+    if settings.bvh:
+        export_bvh(arm, stem + ".bvh", first, last)
+        out["bvh"] = os.path.basename(stem + ".bvh")
+    return out
+
+
+class Progress:
+    """Batch progress on stderr: a bar with ETAs, or JSON lines, or nothing.
+
+    Work is measured in file bytes: the batch ETA is the bytes still to do at the rate of the takes
+    done so far (over ``jobs`` processes), and each take's own ETA its bytes at that rate.
+    """
+
+    def __init__(self, sizes: dict[str, int], mode: str = "bar", jobs: int = 1, stream=None) -> None:
+        self.sizes, self.mode, self.jobs, self.stream = sizes, mode, jobs, stream or sys.stderr
+        self.total = len(sizes)
+        self.done = 0
+        self.left = sum(sizes.values())
+        self.bytes_done = 0
+        self.busy = 0.0  # seconds spent on the takes done (not skipped)
+
+    def _rate(self) -> float:
+        return self.busy / self.bytes_done if self.bytes_done else float("nan")  # seconds per byte
+
+    def event(self, kind: str, **fields) -> None:
+        size = self.sizes.get(fields.get("name", ""), 0)
+        if kind in ("done", "failed", "skipped"):
+            self.done += 1
+            self.left -= size
+            if kind != "skipped":
+                self.busy += fields.get("seconds", 0.0)
+                self.bytes_done += size
+        batch_eta = self.left * self._rate() / self.jobs
+        take_eta = size * self._rate()
+        if self.mode == "json":
+            line = {"event": kind, "done": self.done, "total": self.total, **fields}
+            if batch_eta == batch_eta:
+                line["eta_s"] = round(batch_eta, 1)
+            if kind == "start" and take_eta == take_eta:
+                line["take_eta_s"] = round(take_eta, 1)
+            print(json.dumps(line), file=self.stream, flush=True)
+        elif self.mode == "bar":
+            width = 24
+            filled = int(width * self.done / max(self.total, 1))
+            what = {"start": "working on", "done": "done", "failed": "FAILED", "skipped": "skipped",
+                    "end": "finished"}.get(kind, kind)
+            extra = f": {fields['error']}" if kind == "failed" else ""
+            if kind == "start" and take_eta == take_eta:
+                extra = f" (about {_clock(take_eta)})"
+            elif kind in ("done", "failed"):
+                extra = f" in {_clock(fields.get('seconds', 0.0))}" + extra
+            print(f"[{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} ETA {_clock(batch_eta)}  "
+                  f"{what} {fields.get('name', '')}{extra}", file=self.stream, flush=True)
+
+
+def _clock(seconds: float) -> str:
+    if seconds != seconds:
+        return "--:--"
+    seconds = int(round(seconds))
+    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}" if seconds >= 3600 else \
+        f"{seconds // 60:02d}:{seconds % 60:02d}"
+
+
+def _clean_partials(out_dir: str) -> None:
+    """Remove temporary files a killed run left behind (outputs are renamed into place only when whole)."""
+    for root, _, files in os.walk(out_dir):
+        for name in files:
+            if name.startswith(".") and ".partial" in name:
+                try:
+                    os.remove(os.path.join(root, name))
+                except OSError:
+                    pass
+
+
+def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress: str = "bar") -> dict:
+    """Process every take; returns the summary (also written as summary.json and summary.csv)."""
+    takes = find_takes(inputs)
+    os.makedirs(out_dir, exist_ok=True)
+    _clean_partials(out_dir)
+    sizes = {name: (os.path.getsize(path) if os.path.isfile(path) else 0) for path, name in takes}
+    bar = Progress(sizes, progress, max(1, settings.jobs))
+    rows: list[dict] = []
+    todo = []
+    for path, name in takes:
+        if not settings.force and _finished(out_dir, name, settings):
+            bar.event("skipped", name=name)
+            rows.append(_row(_read_report(out_dir, name), skipped=True))
+        else:
+            todo.append((path, name))
+    start = time.perf_counter()
+    if settings.jobs <= 1 or len(todo) <= 1:
+        for path, name in todo:
+            bar.event("start", name=name)
+            rows.append(_finish(bar, process_take(path, name, out_dir, settings)))
+    else:
+        threads = str(max(1, (os.cpu_count() or 1) // settings.jobs))
+        env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+        saved = {k: os.environ.get(k) for k in env}
+        os.environ.update(env)  # spawned workers read these before numpy and onnxruntime start
+        try:
+            context = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(settings.jobs, mp_context=context) as pool:
+                pending = {}
+                for path, name in todo:  # no "start" events: the pool decides when a take starts
+                    pending[pool.submit(process_take, path, name, out_dir, settings)] = name
+                while pending:
+                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        pending.pop(fut)
+                        rows.append(_finish(bar, fut.result()))
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+    wall = time.perf_counter() - start
+    rows.sort(key=lambda r: r["name"])
+    failed = [r for r in rows if r["status"] == "failed"]
+    frames = sum(r["frames"] or 0 for r in rows if not r["skipped"] and r["status"] == "ok")
+    summary = {"takes": len(rows), "ok": sum(r["status"] == "ok" for r in rows), "failed": len(failed),
+               "skipped": sum(r["skipped"] for r in rows), "seconds": round(wall, 3),
+               "frames_processed": frames, "frames_per_second": round(frames / wall, 1) if wall > 0 else None,
+               "jobs": settings.jobs, "settings": dataclasses.asdict(settings) | {"extra": None}, "takes_detail": rows}
+    _write_summary(out_dir, summary)
+    bar.event("end", name=f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped")
+    return summary
+
+
+def _read_report(out_dir: str, name: str) -> dict:
+    with open(os.path.join(out_dir, name + ".report.json"), encoding="utf-8") as f:
+        return json.load(f)
+
+
+def _finish(bar: Progress, report: dict) -> dict:
+    row = _row(report, skipped=False)
+    if row["status"] == "ok":
+        bar.event("done", name=row["name"], seconds=row["seconds"])
+    else:
+        bar.event("failed", name=row["name"], seconds=row["seconds"], error=row["error"])
+    return row
+
+
+def _row(report: dict, skipped: bool) -> dict:
+    summary = report.get("summary") or {}
+    hand = report.get("hand") or {}
+    return {"name": report.get("name"), "file": report.get("file"), "status": report.get("status"),
+            "skipped": skipped, "error": report.get("error", ""), "frames": report.get("frames"),
+            "confident_share": round(summary["confident_share"], 4) if "confident_share" in summary else None,
+            "uncertain_segments": len(summary.get("uncertain_segments", [])) if summary else None,
+            "marker_rms_mm": hand.get("marker_rms_mm"),
+            "seconds": (report.get("seconds") or {}).get("total", 0.0)}
+
+
+def _write_summary(out_dir: str, summary: dict) -> None:
+    from .core.atomic import atomic_output
+
+    with atomic_output(os.path.join(out_dir, "summary.json")) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        json.dump(summary, f, indent=1)
+    buf = io.StringIO()
+    cols = ["name", "status", "skipped", "frames", "confident_share", "uncertain_segments", "marker_rms_mm",
+            "seconds", "error", "file"]
+    writer = csv.DictWriter(buf, cols, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(summary["takes_detail"])
+    with atomic_output(os.path.join(out_dir, "summary.csv")) as tmp, open(tmp, "w", encoding="utf-8",
+                                                                         newline="") as f:
+        f.write(buf.getvalue())
+
+
+def format_table(summary: dict) -> str:
+    """The summary as a plain-text table for the terminal."""
+    rows = summary["takes_detail"]
+    head = ("take", "status", "frames", "confident", "uncertain", "hand RMS mm", "s")
+    body = [(r["name"], ("skipped" if r["skipped"] else r["status"]) + ("" if not r["error"] else " *"),
+             str(r["frames"] or ""), "" if r["confident_share"] is None else f"{100 * r['confident_share']:.1f} %",
+             "" if r["uncertain_segments"] is None else str(r["uncertain_segments"]),
+             "" if r["marker_rms_mm"] is None else f"{r['marker_rms_mm']:.2f}", f"{r['seconds']:.1f}")
+            for r in rows]
+    widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths))]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(b, widths)) for b in body]
+    for r in rows:
+        if r["error"]:
+            lines.append(f"* {r['name']}: {r['error']}")
+    lines.append(f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped; "
+                 f"{summary['frames_processed']:,} frames in {summary['seconds']:.1f} s with {summary['jobs']} job(s)")
+    return "\n".join(lines)

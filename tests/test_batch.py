@@ -1,0 +1,149 @@
+"""Batch runs: inputs, settings, per-take outcomes on mixed folders, no partial outputs, kill and rerun."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import ROOT, data_path
+from mocap_autolabel.batch import BatchSettings, find_takes, run_batch
+from mocap_autolabel.cli import main
+from mocap_autolabel.core.formats.c3d import write_c3d
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.synth.generate import synthesize
+from mocap_autolabel.core.take import read_take
+
+
+def _synthetic(folder: Path, count: int, frames: int = 300) -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for seed in range(count):
+        path = folder / f"synth{seed}.c3d"
+        write_c3d(synthesize(load_layout("han19"), frames, seed=seed).take, path)
+        paths.append(path)
+    return paths
+
+
+def test_inputs_are_files_folders_and_globs_without_name_clashes(tmp_path):
+    _synthetic(tmp_path / "a", 1)
+    _synthetic(tmp_path / "a" / "deeper", 1)
+    _synthetic(tmp_path / "b", 1)
+    (tmp_path / "a" / "notes.txt").write_text("not a take")
+    found = find_takes([str(tmp_path / "a"), str(tmp_path / "b" / "*.c3d"), str(tmp_path / "b" / "synth0.c3d")])
+    names = sorted(name for _, name in found)
+    assert names == sorted(["synth0", os.path.join("deeper", "synth0"), "synth0-2"])  # b/synth0 once
+
+
+def test_settings_file_and_flags(tmp_path):
+    cfg = tmp_path / "studio.toml"
+    cfg.write_text('[batch]\nlayout = "glove13"\njobs = 2\nconfident = 0.9\ncalibration = "calib/p1.json"\n')
+    s = BatchSettings.from_toml(str(cfg))
+    assert (s.layout, s.jobs, s.confident) == ("glove13", 2, 0.9)
+    assert s.calibration == str(tmp_path / "calib" / "p1.json")
+    (tmp_path / "bad.toml").write_text("layuot = 'han19'\n")
+    with pytest.raises(ValueError, match="unknown setting.*layuot"):
+        BatchSettings.from_toml(str(tmp_path / "bad.toml"))
+    assert main(["batch", str(tmp_path), "-o", str(tmp_path / "out"), "--config", str(tmp_path / "bad.toml")]) == 2
+    assert main(["batch", str(tmp_path / "nowhere"), "-o", str(tmp_path / "out")]) == 2  # no such input
+    assert main(["batch", str(tmp_path / "*.c3d"), "-o", str(tmp_path / "out")]) == 2  # no takes
+
+
+def _outputs_complete(out: Path) -> None:
+    """Every visible file is whole: reports parse, labeled C3Ds read back."""
+    for path in out.rglob("*"):
+        if path.is_dir() or path.name.startswith("."):
+            continue
+        if path.suffix == ".json":
+            json.loads(path.read_text())
+        elif path.suffix == ".c3d":
+            assert read_take(path).n_frames > 0
+
+
+def test_mixed_folder_gives_the_right_outcome_per_file(tmp_path, capsys):
+    takes = tmp_path / "takes"
+    _synthetic(takes, 2)
+    for name in ("Vicon.c3d", "Kistler.c3d"):
+        (takes / name).write_bytes(data_path("c3d", "ezc3d-testFiles", name).read_bytes())
+    good = (takes / "synth0.c3d").read_bytes()
+    (takes / "truncated.c3d").write_bytes(good[: len(good) // 3])
+    (takes / "noise.c3d").write_bytes(os.urandom(4000))
+    (takes / "empty.trc").write_text("")
+    out = tmp_path / "out"
+    code = main(["batch", str(takes), "-o", str(out), "--config", os.devnull, "--quiet"])
+    assert code == 1
+    summary = json.loads((out / "summary.json").read_text())
+    status = {t["name"]: t["status"] for t in summary["takes_detail"]}
+    assert status == {"synth0": "ok", "synth1": "ok", "Vicon": "failed", "Kistler": "failed", "truncated": "failed",
+                      "noise": "failed", "empty": "failed"}
+    errors = {t["name"]: t["error"] for t in summary["takes_detail"]}
+    assert "no hand found" in errors["Vicon"] and "no marker samples" in errors["Kistler"]
+    assert "truncated" in errors["truncated"] and errors["noise"] and errors["empty"]
+    assert all(str(takes) in e for e in errors.values() if e)  # each names its file
+    for name in ("synth0", "synth1"):
+        report = json.loads((out / f"{name}.report.json").read_text())
+        assert report["status"] == "ok" and report["summary"]["labeled_segments"] > 0
+        assert read_take(out / f"{name}.labeled.c3d").names[:3] == load_layout("han19").names[:3]
+    assert not (out / "Vicon.labeled.c3d").exists()
+    assert (out / "summary.csv").read_text().count("\n") == 8
+    _outputs_complete(out)
+    printed = capsys.readouterr().out
+    assert "2 ok, 5 failed, 0 skipped" in printed
+
+
+def test_killed_run_resumes_without_redoing_finished_takes(tmp_path):
+    takes = tmp_path / "takes"
+    _synthetic(takes, 4, frames=1500)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "mocap_autolabel", "batch", str(takes), "-o", str(out), "--json-progress"]
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "addon"))
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
+    done_before = []
+    for line in proc.stderr:
+        event = json.loads(line)
+        if event["event"] == "done":
+            done_before.append(event["name"])
+            proc.send_signal(signal.SIGKILL)  # in the middle of the next take
+            break
+    proc.wait(timeout=60)
+    assert done_before and not (out / "summary.json").exists()
+    _outputs_complete(out)
+    rerun = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
+    assert rerun.returncode == 0, rerun.stderr
+    events = [json.loads(line) for line in rerun.stderr.splitlines() if line.startswith("{")]
+    skipped = sorted(e["name"] for e in events if e["event"] == "skipped")
+    redone = sorted(e["name"] for e in events if e["event"] == "done")
+    assert skipped == sorted(done_before)
+    assert sorted(skipped + redone) == [f"synth{i}" for i in range(4)]
+    assert not [p for p in out.iterdir() if ".partial" in p.name]
+    forced = subprocess.run(cmd[:-1] + ["--force", "--quiet"], capture_output=True, text=True, env=env, timeout=600)
+    assert forced.returncode == 0 and "4 ok, 0 failed, 0 skipped" in forced.stdout
+
+
+def test_two_jobs_give_the_same_outputs(tmp_path):
+    takes = tmp_path / "takes"
+    _synthetic(takes, 2)
+    one = run_batch([str(takes)], str(tmp_path / "one"), BatchSettings(), progress="none")
+    two = run_batch([str(takes)], str(tmp_path / "two"), BatchSettings(jobs=2), progress="none")
+    assert one["ok"] == two["ok"] == 2
+    for name in ("synth0", "synth1"):
+        a = read_take(tmp_path / "one" / f"{name}.labeled.c3d")
+        b = read_take(tmp_path / "two" / f"{name}.labeled.c3d")
+        assert a.names == b.names and (a.valid == b.valid).all()
+
+
+def test_blend_and_hand_outputs(tmp_path, bpy_module):
+    takes = tmp_path / "takes"
+    _synthetic(takes, 1, frames=400)
+    start = time.perf_counter()
+    summary = run_batch([str(takes)], str(tmp_path / "out"), BatchSettings(blend=True, fbx=True), progress="none")
+    assert summary["ok"] == 1, summary["takes_detail"]
+    report = json.loads((tmp_path / "out" / "synth0.report.json").read_text())
+    assert report["outputs"] == {"labeled": "synth0.labeled.c3d", "blend": "synth0.blend", "fbx": "synth0.fbx"}
+    assert report["hand"]["marker_rms_mm"] < 8 and time.perf_counter() - start < 300
+    assert (tmp_path / "out" / "synth0.blend").stat().st_size > 0
