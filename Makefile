@@ -42,6 +42,7 @@ bench: venv
 	$(BIN)/python benchmarks/temporal.py
 	$(BIN)/python benchmarks/hand_solve.py
 	$(BIN)/python benchmarks/validation.py
+	$(BIN)/python benchmarks/batch.py
 
 ## models: retrain every shipped model (set, perm, cnn for han19 and glove13), seeded, then recalibrate
 ## the segment confidences; about 1.5 hours on 2 cores

@@ -147,3 +147,14 @@ def test_blend_and_hand_outputs(tmp_path, bpy_module):
     assert report["outputs"] == {"labeled": "synth0.labeled.c3d", "blend": "synth0.blend", "fbx": "synth0.fbx"}
     assert report["hand"]["marker_rms_mm"] < 8 and time.perf_counter() - start < 300
     assert (tmp_path / "out" / "synth0.blend").stat().st_size > 0
+
+
+def test_batch_runs_as_a_blender_script(tmp_path):
+    """The way `blender -b --python-exit-code 1 -P addon/mocap_autolabel/cli.py -- batch ...` runs it."""
+    takes = tmp_path / "takes"
+    _synthetic(takes, 2)
+    script = ROOT / "addon" / "mocap_autolabel" / "cli.py"
+    done = subprocess.run([sys.executable, str(script), "--", "batch", str(takes), "-o", str(tmp_path / "out"),
+                           "--jobs", "2", "--quiet"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "2 ok, 0 failed, 0 skipped" in done.stdout
