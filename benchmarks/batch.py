@@ -15,6 +15,7 @@ import tempfile
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "addon"))
 
+from datasets import write_report  # noqa: E402
 from mocap_autolabel.batch import BatchSettings, run_batch  # noqa: E402
 from mocap_autolabel.core.formats.c3d import write_c3d  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
@@ -49,9 +50,7 @@ def main() -> None:
                 print(lines[-1], flush=True)
     lines += ["", "Each job is a spawned process; with 2 jobs each labeler runs one ONNX thread (they run two "
               "otherwise), so the speed-up shows what process parallelism adds on top of the threads.", ""]
-    with open(REPORT, "w", encoding="utf-8") as f:
-        f.write("\n".join(lines) + "\n")
-    print(f"wrote {REPORT}")
+    write_report(REPORT, lines)
 
 
 if __name__ == "__main__":

@@ -40,3 +40,11 @@ def glove13_take(layout: Layout):
     index = {n: i for i, n in enumerate(layout.names)}
     truth = np.array([index.get(n, -1) for n in take.names])
     return take, truth
+
+
+def write_report(path: str, lines: list[str]) -> None:
+    """Write a markdown report (one line per item) and say where."""
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines) + "\n")
+    print(f"wrote {path}")

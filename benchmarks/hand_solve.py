@@ -17,6 +17,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "addon"))
 sys.path.insert(0, os.path.dirname(__file__))
 
+from datasets import write_report  # noqa: E402
 from mocap_autolabel.core.hand import HandModel  # noqa: E402
 from mocap_autolabel.core.hand.calibrate import calibrate  # noqa: E402
 from mocap_autolabel.core.hand.ik import HandSolver  # noqa: E402
@@ -153,10 +154,7 @@ def main() -> None:
     joint_errors(args, lines)
     calibration(args, lines)
     real_glove(args, lines)
-    os.makedirs(os.path.dirname(REPORT), exist_ok=True)
-    with open(REPORT, "w", encoding="utf-8") as f:
-        f.write("\n".join(lines) + "\n")
-    print(f"wrote {REPORT}")
+    write_report(REPORT, lines)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "addon"))
 sys.path.insert(0, os.path.dirname(__file__))
 
+from datasets import write_report  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
 from mocap_autolabel.core.metrics import score_labeling, segments_right  # noqa: E402
 from mocap_autolabel.core.pipeline import label_take  # noqa: E402
@@ -66,9 +67,7 @@ def main() -> None:
               "(a sample more than 16 mm off the first fit is left out of the second), adds every point's "
               "distance to the fitted markers to the labeler's scores (sigma = max(4 mm, 2 x fit RMS)), votes "
               "again, and caps at 0.5 the confidence of segments whose median residual exceeds the 8 mm gate.", ""]
-    with open(REPORT, "w", encoding="utf-8") as f:
-        f.write("\n".join(lines) + "\n")
-    print(f"wrote {REPORT}")
+    write_report(REPORT, lines)
 
 
 if __name__ == "__main__":

@@ -35,5 +35,9 @@ def bpy_module():
 
 @pytest.fixture
 def empty_scene(bpy_module):
+    import addon_utils
+
     bpy_module.ops.wm.read_homefile(use_empty=True)
+    if "mocap_autolabel" not in bpy_module.context.preferences.addons:  # factory settings (a CLI run) drop it
+        addon_utils.enable("mocap_autolabel", default_set=True)
     return bpy_module.context.scene

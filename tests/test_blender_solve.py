@@ -135,13 +135,10 @@ def test_solve_errors_are_one_line(tmp_path, capsys, bpy_module):
     assert "not a valid calibration" in capsys.readouterr().err
 
 
-def test_solve_operator_on_an_imported_labeled_take(bpy_module, solved, tmp_path):
+def test_solve_operator_on_an_imported_labeled_take(bpy_module, solved, empty_scene, tmp_path):
     bpy = bpy_module
-    import addon_utils
     from mocap_autolabel.blender import animio
 
-    bpy.ops.wm.read_homefile(use_empty=True)
-    addon_utils.enable("mocap_autolabel", default_set=True)  # factory settings (the CLI's) turned it off
     labeled = solved["blend"].parent / "labeled.c3d"
     bpy.ops.mocap_autolabel.import_markers(filepath=str(labeled))
     bpy.context.view_layer.objects.active = bpy.data.objects["IndexTip"]

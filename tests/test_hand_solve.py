@@ -80,12 +80,16 @@ def test_smoothing_removes_noise_but_keeps_the_motion():
     np.testing.assert_array_equal(smooth_poses(raw.poses, 120.0, 0.0), raw.poses)
 
 
-def test_calibration_recovers_offsets_and_hand_length():
-    base = HandModel(side="right")
-    true = HandModel(base.length * 1.1, base.breadth, "right")
-    rng = np.random.default_rng(11)
-    offsets = rng.normal(size=(len(HAN19), 3))
+def _perturbed(side: str, seed: int):
+    """The average hand, the performer's (10 % longer), and markers each 10 mm off the layout."""
+    base = HandModel(side=side)
+    offsets = np.random.default_rng(seed).normal(size=(len(HAN19), 3))
     offsets *= 0.010 / np.linalg.norm(offsets, axis=1, keepdims=True)
+    return base, HandModel(base.length * 1.1, base.breadth, side), offsets
+
+
+def test_calibration_recovers_offsets_and_hand_length():
+    base, true, offsets = _perturbed("right", 11)
     _, observed = _take(true, 1200, seed=11, noise=0.0005, offsets=offsets, flat=60)
     cal = calibrate(observed, HAN19, hand=base, frames=25, reference=np.arange(60))
     assert cal.side == "right"
@@ -140,11 +144,7 @@ def test_real_glove_fits_within_three_millimetres_after_calibration():
 
 def test_pinch_contacts_settle_what_the_markers_leave_open():
     """Without a reference pose, tip offsets along their arc are a guess; pinch contacts measure them."""
-    base = HandModel(side="left")
-    true = HandModel(base.length * 1.1, base.breadth, "left")
-    rng = np.random.default_rng(101)
-    offsets = rng.normal(size=(len(HAN19), 3))
-    offsets *= 0.010 / np.linalg.norm(offsets, axis=1, keepdims=True)
+    base, true, offsets = _perturbed("left", 101)
     fingers = ("index", "middle", "ring", "little")
     pinches = [(100 + 37 * i, fingers[i % 4]) for i in range(32)]
     _, observed = marker_motion(HAN19, true, 2400, 101, 0.0005, offsets, pinches=pinches)

@@ -219,32 +219,12 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
 
 
 def _blender_outputs(take, solved, stem: str, settings: BatchSettings) -> dict:
-    import bpy
+    from .blender.export import write_solved_scene
 
-    from .blender.armature import build_solved_hand
-    from .blender.export import export_bvh, export_fbx
-    from .blender.scene import ImportOptions, build_take
-    from .core.atomic import atomic_output
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    build_take(take, scene, ImportOptions())
-    collection = bpy.data.collections.new("Hand")
-    scene.collection.children.link(collection)
-    arm = build_solved_hand(solved, collection)
-    first, last = solved.first_frame, solved.first_frame + take.n_frames - 1
-    out = {}
-    if settings.blend:
-        with atomic_output(stem + ".blend") as tmp:
-            bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
-        out["blend"] = os.path.basename(stem + ".blend")
-    if settings.fbx:
-        export_fbx(arm, stem + ".fbx", first, last)
-        out["fbx"] = os.path.basename(stem + ".fbx")
-    if settings.bvh:
-        export_bvh(arm, stem + ".bvh", first, last)
-        out["bvh"] = os.path.basename(stem + ".bvh")
-    return out
+    paths = {kind: stem + "." + kind if on else None
+             for kind, on in (("blend", settings.blend), ("fbx", settings.fbx), ("bvh", settings.bvh))}
+    written = write_solved_scene(take, solved, **paths)
+    return {kind: os.path.basename(path) for kind, path in written.items()}
 
 
 class Progress:

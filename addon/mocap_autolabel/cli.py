@@ -213,10 +213,9 @@ def _bpy_or_none(what: str):
 
 def _save_blend(bpy, path: str) -> None:
     """Save the open scene to ``path``, complete or not at all."""
-    from .core.atomic import atomic_output
+    from .blender.export import save_blend
 
-    with atomic_output(path) as tmp:
-        bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
+    save_blend(path)
 
 
 def _import(args) -> int:
@@ -401,26 +400,10 @@ def _solve(args) -> int:
 
 def _solve_outputs(bpy, take, solved, args) -> None:
     """The labeled markers beside the calibrated, animated rig; then .blend, FBX and BVH."""
-    from .blender.armature import build_solved_hand
-    from .blender.export import export_bvh, export_fbx
-    from .blender.scene import ImportOptions, build_take
+    from .blender.export import write_solved_scene
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    build_take(take, scene, ImportOptions())
-    collection = bpy.data.collections.new("Hand")
-    scene.collection.children.link(collection)
-    arm = build_solved_hand(solved, collection)
-    first, last = solved.first_frame, solved.first_frame + take.n_frames - 1
-    if args.blend:
-        _save_blend(bpy, args.blend)
-        print(f"  blend    {args.blend}")
-    if args.fbx:
-        export_fbx(arm, args.fbx, first, last)
-        print(f"  fbx      {args.fbx}")
-    if args.bvh:
-        export_bvh(arm, args.bvh, first, last)
-        print(f"  bvh      {args.bvh}")
+    for kind, path in write_solved_scene(take, solved, args.blend, args.fbx, args.bvh).items():
+        print(f"  {kind:8s} {path}")
 
 
 def _batch(args) -> int:

@@ -44,3 +44,38 @@ def export_bvh(arm_obj: bpy.types.Object, path: str, frame_start: int, frame_end
     _only_selected(arm_obj)
     _run(path, lambda tmp: bpy.ops.export_anim.bvh(filepath=tmp, frame_start=frame_start, frame_end=frame_end,
                                                    rotate_mode="NATIVE", global_scale=1.0))
+
+
+def save_blend(path: str) -> None:
+    """Save the open scene to ``path``, complete or not at all."""
+    with atomic_output(path) as tmp:
+        bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
+
+
+def write_solved_scene(take, solved, blend: str | None = None, fbx: str | None = None,
+                       bvh: str | None = None) -> dict[str, str]:
+    """A fresh scene with the labeled markers beside the solved, keyed rig; then the asked-for files.
+
+    Returns ``{"blend" | "fbx" | "bvh": path}`` of what was written.
+    """
+    from .armature import build_solved_hand
+    from .scene import ImportOptions, build_take
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    build_take(take, scene, ImportOptions())
+    collection = bpy.data.collections.new("Hand")
+    scene.collection.children.link(collection)
+    arm = build_solved_hand(solved, collection)
+    first, last = solved.first_frame, solved.first_frame + take.n_frames - 1
+    out = {}
+    if blend:
+        save_blend(blend)
+        out["blend"] = blend
+    if fbx:
+        export_fbx(arm, fbx, first, last)
+        out["fbx"] = fbx
+    if bvh:
+        export_bvh(arm, bvh, first, last)
+        out["bvh"] = bvh
+    return out
