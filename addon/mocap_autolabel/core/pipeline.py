@@ -110,7 +110,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                constraints: Sequence[Constraint] = (), model: str | None = None, fit: np.ndarray | None = None,
                start: np.ndarray | None = None, score: str = "likelihood", p: float = 2.0, q: float = -0.5,
                n_best: int = 5, split_swaps: bool = True, labeler: Labeler | None = None, calibrate: bool = True,
-               validate: bool = False, hand: Calibration | None = None,
+               validate: bool = False, hand: Calibration | None = None, splits: Sequence[tuple[int, int]] = (),
                progress: Callable[[str], None] | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
@@ -132,6 +132,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         validate: IK validation (:mod:`.validate`, ``vote`` only): fit the hand to the labels, vote
             again with the fit's evidence, and downgrade segments the hand cannot explain.
         hand: the performer's calibration for ``validate`` (default: calibrated on this take).
+        splits: ``(slot, frame)`` points where a reviewer cut a tracklet: decided in two parts.
         progress: called with a short message at each stage.
 
     Returns:
@@ -171,6 +172,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     cuts: dict[int, list[int]] = {}
     for c in constraints:
         cuts.setdefault(c.slot, []).extend([c.start, c.stop])
+    for slot, frame in splits:
+        cuts.setdefault(int(slot), []).append(int(frame))
     segments = split_segments(Segments(tracklets.slot.astype(np.int64), tracklets.start, tracklets.stop), cuts)
     locked_at = np.full(valid.shape, EMPTY, dtype=np.int16)  # the locked label of each sample
     for c in constraints:
