@@ -187,11 +187,34 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
         best[s] = m if label == NULL else label
     if not _conflicts(best, segments, m):
         return np.where(best == m, NULL, best)
+    # Segments interact only through a shared candidate label over overlapping frames: solve just
+    # the groups of interacting segments that hold a clash; every other segment keeps its best.
+    group = _interacting_groups(var_seg, var_lab, segments, m, n)
+    clashing = np.unique(group[_clashing(best, segments, m)])
+    inside = np.isin(group, clashing)
+    out = best.copy()
+    keep_var = inside[var_seg]
+    sub = np.flatnonzero(inside)
+    index = np.full(n, -1, dtype=np.int64)
+    index[sub] = np.arange(len(sub))
+    sub_locked = {int(index[s]): lab for s, lab in locked.items() if inside[s]}
+    sub_segments = Segments(segments.slot[sub], segments.start[sub], segments.stop[sub])
+    out[sub] = _milp_assignment(weights[sub], sub_segments, index[var_seg[keep_var]], var_lab[keep_var],
+                                sub_locked, time_limit)
+    return np.where(out == m, NULL, out)
 
+
+def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarray, var_lab: np.ndarray,
+                     locked: dict[int, int], time_limit: float) -> np.ndarray:
+    """The exclusive assignment as an integer programme over the candidate (segment, label) pairs;
+    returns labels with null as ``M``."""
+    n, m1 = weights.shape
+    m = m1 - 1
+    n_vars = len(var_seg)
     rows, cols, n_rows = [], [], 0
     # Each segment takes exactly one label (null included).
     rows.append(var_seg)
-    cols.append(np.arange(len(pairs)))
+    cols.append(np.arange(n_vars))
     n_rows = n
     # Cliques: per label, the candidate segments alive at each candidate's start frame.
     for label in range(m):
@@ -212,22 +235,65 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
             cols.append(members)
             n_rows += 1
     a = csr_matrix((np.ones(sum(len(r) for r in rows)), (np.concatenate(rows), np.concatenate(cols))),
-                   shape=(n_rows, len(pairs)))
+                   shape=(n_rows, n_vars))
     lb_rows = np.concatenate([np.ones(n), np.zeros(n_rows - n)])
     ub_rows = np.ones(n_rows)
-    lower = np.zeros(len(pairs))
+    lower = np.zeros(n_vars)
     for s, label in locked.items():
         col = m if label == NULL else label
         lower[np.flatnonzero((var_seg == s) & (var_lab == col))] = 1.0
     cost = -weights[var_seg, var_lab]
-    res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=np.ones(len(pairs)),
-               bounds=Bounds(lower, np.ones(len(pairs))), options={"time_limit": time_limit})
+    res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=np.ones(n_vars),
+               bounds=Bounds(lower, np.ones(n_vars)), options={"time_limit": time_limit})
     if res.x is None:
         raise ValueError(f"no exclusive labeling exists: {res.message}")
     chosen = res.x > 0.5
     out = np.full(n, m, dtype=np.int64)
     out[var_seg[chosen]] = var_lab[chosen]
-    return np.where(out == m, NULL, out)
+    return out
+
+
+def _interacting_groups(var_seg: np.ndarray, var_lab: np.ndarray, segments: Segments, m: int,
+                        n: int) -> np.ndarray:
+    """``(S,)`` group id: segments linked by a shared real candidate label over overlapping frames."""
+    parent = np.arange(n)
+
+    def find(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for label in np.unique(var_lab[var_lab < m]):
+        segs = var_seg[var_lab == label]
+        segs = segs[np.argsort(segments.start[segs], kind="stable")]
+        reach, head = -1, -1
+        for sg in segs.tolist():  # a sweep: overlapping runs of this label's candidates join up
+            if segments.start[sg] < reach:
+                a, b = find(head), find(sg)
+                if a != b:
+                    parent[b] = a
+                reach = max(reach, int(segments.stop[sg]))
+            else:
+                head, reach = sg, int(segments.stop[sg])
+    return np.array([find(i) for i in range(n)])
+
+
+def _clashing(labels: np.ndarray, segments: Segments, m: int) -> np.ndarray:
+    """Segments whose real label overlaps another segment with the same label."""
+    out = np.zeros(len(labels), dtype=bool)
+    named = np.flatnonzero(labels < m)
+    for label in np.unique(labels[named]):
+        idx = named[labels[named] == label]
+        idx = idx[np.argsort(segments.start[idx], kind="stable")]
+        if len(idx) < 2:
+            continue
+        running = np.maximum.accumulate(segments.stop[idx])
+        hit = np.flatnonzero(segments.start[idx][1:] < running[:-1]) + 1
+        for h in hit.tolist():  # the clash is with some earlier segment still running
+            out[idx[h]] = True
+            out[idx[:h][segments.stop[idx[:h]] > segments.start[idx[h]]]] = True
+    return out
 
 
 def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str = "likelihood", p: float = 2.0,
