@@ -175,7 +175,10 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     if n == 0:
         return np.zeros(0, dtype=np.int64)
     top = np.argsort(-weights[:, :m], axis=1)[:, :min(candidates, m)]
-    pairs = {(s, int(label)) for s in range(n) for label in top[s]}
+    # A label weighing no more than null is never worth taking: null scores higher and frees the
+    # label for others. Leaving such candidates out is exact and keeps the groups small.
+    useful = np.take_along_axis(weights, top, axis=1) > weights[:, m:m1]
+    pairs = {(s, int(label)) for s in range(n) for label, ok in zip(top[s], useful[s]) if ok}
     pairs |= {(s, m) for s in range(n)}
     pairs |= {(s, (m if label == NULL else label)) for s, label in locked.items()}
     pairs = sorted(pairs)
