@@ -127,17 +127,18 @@ def find_takes(inputs: list[str]) -> list[tuple[str, str]]:
     return out
 
 
-def _finished(out_dir: str, name: str, settings: BatchSettings) -> bool:
-    report = os.path.join(out_dir, name + ".report.json")
-    if not os.path.isfile(report):
-        return False
+def _finished(out_dir: str, name: str, settings: BatchSettings) -> dict | None:
+    """The report of a take whose outputs are all complete, or None if it must be (re)done."""
     try:
-        with open(report, encoding="utf-8") as f:
-            if json.load(f).get("status") != "ok":
-                return False
+        with open(os.path.join(out_dir, name + ".report.json"), encoding="utf-8") as f:
+            report = json.load(f)
     except (OSError, ValueError):
-        return False
-    return all(os.path.isfile(os.path.join(out_dir, name + s)) for s in settings.outputs())
+        return None
+    if report.get("status") != "ok":
+        return None
+    if not all(os.path.isfile(os.path.join(out_dir, name + s)) for s in settings.outputs()):
+        return None
+    return report
 
 
 def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
@@ -305,9 +306,10 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
     rows: list[dict] = []
     todo = []
     for path, name in takes:
-        if not settings.force and _finished(out_dir, name, settings):
+        report = None if settings.force else _finished(out_dir, name, settings)
+        if report is not None:
             bar.event("skipped", name=name)
-            rows.append(_row(_read_report(out_dir, name), skipped=True))
+            rows.append(_row(report, skipped=True))
         else:
             todo.append((path, name))
     start = time.perf_counter()
@@ -348,11 +350,6 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
     _write_summary(out_dir, summary)
     bar.event("end", name=f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped")
     return summary
-
-
-def _read_report(out_dir: str, name: str) -> dict:
-    with open(os.path.join(out_dir, name + ".report.json"), encoding="utf-8") as f:
-        return json.load(f)
 
 
 def _finish(bar: Progress, report: dict) -> dict:

@@ -211,17 +211,11 @@ def _bpy_or_none(what: str):
     return bpy
 
 
-def _save_blend(bpy, path: str) -> None:
-    """Save the open scene to ``path``, complete or not at all."""
-    from .blender.export import save_blend
-
-    save_blend(path)
-
-
 def _import(args) -> int:
     bpy = _bpy_or_none("the import command")
     if bpy is None:
         return EXIT_FAILED
+    from .blender.export import save_blend
     from .blender.scene import ImportOptions, build_take
     from .core.atomic import atomic_output
     from .core.take import read_take
@@ -234,7 +228,7 @@ def _import(args) -> int:
     scene = bpy.context.scene
     options = ImportOptions(scale=args.scale, frame_offset=args.frame_offset, name_filter=args.names)
     collection = build_take(take, scene, options)
-    _save_blend(bpy, args.blend)
+    save_blend(args.blend)
     summary = take.summary() | {
         "blend": os.path.abspath(args.blend),
         "collection": collection.name,
@@ -387,8 +381,11 @@ def _solve(args) -> int:
         cal.save(args.save_calibration)
         print(f"  calibration {args.save_calibration}")
     if bpy is not None:
-        try:
-            _solve_outputs(bpy, take, solved, args)
+        from .blender.export import write_solved_scene
+
+        try:  # the labeled markers beside the calibrated, animated rig; then .blend, FBX and BVH
+            for kind, path in write_solved_scene(take, solved, args.blend, args.fbx, args.bvh).items():
+                print(f"  {kind:8s} {path}")
         except Exception as exc:
             return _fail(args.file, exc)
     if args.report:
@@ -396,14 +393,6 @@ def _solve(args) -> int:
             json.dump(report, fh, indent=1)
         print(f"  report   {args.report}")
     return EXIT_OK
-
-
-def _solve_outputs(bpy, take, solved, args) -> None:
-    """The labeled markers beside the calibrated, animated rig; then .blend, FBX and BVH."""
-    from .blender.export import write_solved_scene
-
-    for kind, path in write_solved_scene(take, solved, args.blend, args.fbx, args.bvh).items():
-        print(f"  {kind:8s} {path}")
 
 
 def _batch(args) -> int:
@@ -521,6 +510,7 @@ def _synth_blend(synth, path: str) -> int:
     if bpy is None:
         return EXIT_FAILED
     from .blender.armature import build_hand, key_poses
+    from .blender.export import save_blend
     from .blender.scene import ImportOptions, build_take
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -530,7 +520,7 @@ def _synth_blend(synth, path: str) -> int:
     scene.collection.children.link(truth)
     objs = build_hand(synth.hand, name="TrueHand", collection=truth, layout=synth.layout)
     key_poses(objs["armature"], synth.hand, synth.poses, first_frame=synth.take.first_frame)
-    _save_blend(bpy, path)
+    save_blend(path)
     print(f"  blend    {path}")
     return EXIT_OK
 

@@ -51,9 +51,15 @@ def matrix_to_rotvec(matrix: np.ndarray) -> np.ndarray:
                     m[..., 0, 2] - m[..., 2, 0])
     z = np.copysign(np.sqrt(np.clip(1.0 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2], 0, None)) / 2,
                     m[..., 1, 0] - m[..., 0, 1])
-    v = np.stack([x, y, z], axis=-1)
+    return quaternion_to_rotvec(np.stack([w, x, y, z], axis=-1))
+
+
+def quaternion_to_rotvec(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(..., 4)`` (w, x, y, z; either sign) to rotation vectors ``(..., 3)``."""
+    q = q * np.where(q[..., :1] < 0, -1.0, 1.0)
+    v = q[..., 1:]
     s = np.linalg.norm(v, axis=-1)
-    angle = 2 * np.arctan2(s, w)
+    angle = 2 * np.arctan2(s, q[..., 0])
     return v * np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0)[..., None]
 
 

@@ -25,6 +25,7 @@ import numpy as np
 from ..atomic import atomic_output
 from ..errors import MocapInputError
 from ..layout import Layout
+from ..synth.poses import CANONICAL_POSES
 from .ik import MIN_MARKERS, HandSolver
 from .skeleton import BONE_INDEX, DIGITS, FINGERS, N_DOF, POSE_LIMITS, HandModel
 from .skin import Binding, segment_weights, skin_point
@@ -208,7 +209,7 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
     if reference is not None and len(reference):
         ref = np.asarray(reference, dtype=int)
         ref = ref[np.linspace(0, len(ref) - 1, min(5, len(ref))).astype(int)]
-        joints = np.radians([0, 20, 0, 0] + [0] * 16) if reference_pose is None else np.asarray(reference_pose)
+        joints = CANONICAL_POSES["flat"] if reference_pose is None else np.asarray(reference_pose)
         ref_solver = HandSolver(hand, placed)
         ref_poses = ref_solver.cold_start(observed[ref])
         ref_poses[:, 6:] = joints

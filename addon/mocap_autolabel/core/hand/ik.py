@@ -18,7 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from ..rotations import continuous_quaternions, matrix_to_quaternion, matrix_to_rotvec, rotvec_to_matrix
+from ..rotations import (
+    continuous_quaternions,
+    matrix_to_quaternion,
+    matrix_to_rotvec,
+    quaternion_to_rotvec,
+    rotvec_to_matrix,
+)
+from ..synth.poses import CANONICAL_POSES
 from .skeleton import DOF_INDEX, FINGERS, N_DOF, PARENTS, POSE_LIMITS, HandModel
 from .skin import Binding
 
@@ -27,12 +34,8 @@ GATE = 0.008
 #: Fewest visible markers a frame needs to be solved at all.
 MIN_MARKERS = 4
 
-# Joint angles (20,) of the poses a cold start tries, degrees: relaxed, flat, fist.
-_COLD_DEG = np.array([
-    [10, 30, 10, 10] + [20, 0, 30, 15, 25, 0, 35, 20, 30, 0, 40, 25, 35, 0, 45, 30],
-    [0, 20, 0, 0] + [0, 0, 0, 0] * 4,
-    [30, 20, 50, 40] + [85, 0, 100, 65, 88, 0, 100, 65, 90, 0, 100, 65, 90, 0, 100, 65],
-])
+#: The poses a cold start tries (joint angles, radians).
+_COLD_POSES = np.stack([CANONICAL_POSES[name] for name in ("relaxed", "flat", "fist")])
 
 
 def _descendants() -> np.ndarray:
@@ -231,7 +234,7 @@ class HandSolver:
         best, best_cost = np.zeros((n, N_DOF)), np.full(n, np.inf)
         seen = np.isfinite(observed).all(axis=-1)
         wts = np.where(self._rigid, 1.0, 0.3)[None] * seen  # (F, M)
-        for joints in np.radians(_COLD_DEG):
+        for joints in _COLD_POSES:
             canon = np.zeros(N_DOF)
             canon[6:] = joints
             model = self.markers(canon[None])[0]  # hand frame (global identity)
@@ -331,19 +334,10 @@ def smooth_poses(poses: np.ndarray, rate: float, cutoff_hz: float = 10.0) -> np.
         lin = np.concatenate([quat, run[:, 3:]], axis=1)
         lin = sosfiltfilt(sos, lin, axis=0, padlen=min(stop - start - 1, 30))
         quat = lin[:, :4] / np.linalg.norm(lin[:, :4], axis=1, keepdims=True)
-        run[:, 0:3] = _quaternion_to_rotvec(quat)
+        run[:, 0:3] = quaternion_to_rotvec(quat)
         run[:, 3:] = lin[:, 4:]
         run[:, 6:] = np.clip(run[:, 6:], POSE_LIMITS[0, 6:], POSE_LIMITS[1, 6:])
     return out
-
-
-def _quaternion_to_rotvec(q: np.ndarray) -> np.ndarray:
-    """Unit quaternions ``(..., 4)`` (w, x, y, z) to rotation vectors ``(..., 3)``."""
-    q = q * np.where(q[..., :1] < 0, -1.0, 1.0)
-    v = q[..., 1:]
-    s = np.linalg.norm(v, axis=-1, keepdims=True)
-    angle = 2 * np.arctan2(s, q[..., :1])
-    return v * np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0)
 
 
 def _kabsch(model: np.ndarray, observed: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

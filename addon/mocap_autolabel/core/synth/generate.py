@@ -35,6 +35,7 @@ from .corrupt import (
     persistent_ghosts,
 )
 from .motion import MotionConfig, generate_motion
+from .poses import CANONICAL_POSES
 
 GHOST = -1  #: truth label of a ghost sample
 EMPTY = -2  #: truth label where a slot has no sample
@@ -375,7 +376,7 @@ def corrupt_take(markers: np.ndarray, rate: float, seed: int, cfg: TakeCorruptio
 
 
 #: Joint angles (20,) of the flat hand that range-of-motion takes start with, radians.
-FLAT_HAND = np.radians([0, 20, 0, 0] + [0] * 16)
+FLAT_HAND = CANONICAL_POSES["flat"]
 
 
 def marker_motion(layout: Layout, hand: HandModel, frames: int, seed: int, noise: float = 0.0,
