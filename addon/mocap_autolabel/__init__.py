@@ -7,28 +7,64 @@ register/unregister, so the core and the CLI work without Blender.
 
 __version__ = "0.1.0"
 
+#: Shortcuts of the review, in the Frames keymap (every editor): (operator, key, properties).
+SHORTCUTS = (("mocap_autolabel.next_uncertain", "RIGHT_ARROW", {"previous": False}),
+             ("mocap_autolabel.next_uncertain", "LEFT_ARROW", {"previous": True}))
+_keymap_items: list = []
+
 
 def _classes():
     from . import operators, ui
+    from .blender import properties
 
-    return operators.classes + ui.classes
+    return properties.classes + operators.classes + ui.classes
+
+
+def _add_shortcuts() -> None:
+    import bpy
+
+    keyconfig = bpy.context.window_manager.keyconfigs.addon
+    if keyconfig is None:  # background mode has no add-on keyconfig
+        return
+    keymap = keyconfig.keymaps.new(name="Frames")
+    for idname, key, props in SHORTCUTS:
+        item = keymap.keymap_items.new(idname, key, "PRESS", shift=True, alt=True)
+        for name, value in props.items():
+            setattr(item.properties, name, value)
+        _keymap_items.append((keymap, item))
 
 
 def register() -> None:
     import bpy
 
+    from .blender import properties, session
+    from .ui import overlay
     from .ui.menus import menu_import
 
     for cls in _classes():
         bpy.utils.register_class(cls)
+    properties.register()
     bpy.types.TOPBAR_MT_file_import.append(menu_import)
+    bpy.app.handlers.load_post.append(session.forget_all)
+    overlay.register()
+    _add_shortcuts()
 
 
 def unregister() -> None:
     import bpy
 
+    from .blender import properties, session
+    from .ui import overlay
     from .ui.menus import menu_import
 
+    for keymap, item in _keymap_items:
+        keymap.keymap_items.remove(item)
+    _keymap_items.clear()
+    overlay.unregister()
+    if session.forget_all in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(session.forget_all)
+    session.forget_all()
     bpy.types.TOPBAR_MT_file_import.remove(menu_import)
+    properties.unregister()
     for cls in reversed(_classes()):
         bpy.utils.unregister_class(cls)

@@ -68,43 +68,82 @@ def build_take(take: Take, scene: bpy.types.Scene, options: ImportOptions | None
     collection["mocap_source"] = take.source
     collection["mocap_rate"] = float(take.rate)
 
+    collection["mocap_scale"] = float(options.scale)
     first = int(take.first_frame) + int(options.frame_offset)
+    collection["mocap_first"] = first  # the Blender frame of positions[0]
     frames_all = np.arange(take.n_frames, dtype=np.float32) + first
-    const, linear = animio.interpolation_value("CONSTANT"), animio.interpolation_value("LINEAR")
     valid_all = take.valid
     for slot in selected_points(take, options.name_filter):
-        obj = bpy.data.objects.new(take.names[slot], None)
-        obj.empty_display_type = "SPHERE"
-        obj.empty_display_size = MARKER_DISPLAY_SIZE * options.scale
+        obj = new_marker(take.names[slot], collection, options.scale)
         obj["mocap_slot"] = int(slot)
-        collection.objects.link(obj)
+        obj["mocap_point"] = take.names[slot]  # the object's name may get a .001
         valid = valid_all[:, slot]
         if not valid.any():
             obj.hide_viewport = obj.hide_render = True
             continue
-        animio.ensure_action(obj, f"{collection.name}|{obj.name}")
-        frames = frames_all[valid]
-        # The last key before each gap holds its value instead of interpolating across the gap.
-        idx = np.flatnonzero(valid)
-        interp = np.full(idx.shape[0], linear, dtype=np.int32)
-        interp[:-1][np.diff(idx) > 1] = const
-        xyz = take.positions[valid, slot] * options.scale
-        for axis in range(3):
-            fc = animio.new_fcurve(obj, "location", axis, group="Location")
-            animio.write_keys(fc, frames, xyz[:, axis], interp)
-        obj.location = xyz[0]
-        if not valid.all():
-            _key_visibility(obj, valid, frames_all, const)
+        key_track(obj, frames_all, valid, take.positions[:, slot] * options.scale,
+                  action=f"{collection.name}|{obj.name}")
     if options.set_scene and take.n_frames:
         set_scene_timing(scene, take.rate, first, first + take.n_frames - 1)
     return collection
 
 
-def _key_visibility(obj: bpy.types.Object, valid: np.ndarray, frames: np.ndarray, const: int) -> None:
+def new_marker(name: str, collection: bpy.types.Collection, scale: float = 1.0) -> bpy.types.Object:
+    """A marker-sized sphere empty linked to ``collection``."""
+    obj = bpy.data.objects.new(name, None)
+    obj.empty_display_type = "SPHERE"
+    obj.empty_display_size = MARKER_DISPLAY_SIZE * scale
+    collection.objects.link(obj)
+    return obj
+
+
+def key_track(obj: bpy.types.Object, frames_all: np.ndarray, valid: np.ndarray, xyz: np.ndarray,
+              key_types: np.ndarray | None = None, group: str = "Location", action: str | None = None,
+              hold_type: str = "KEYFRAME") -> list:
+    """Write (or rewrite) ``obj``'s location keys from one track, in bulk.
+
+    A sample becomes a key at its frame. No key is written inside a gap: the last key before a
+    gap holds (CONSTANT), and ``hide_viewport``/``hide_render`` are keyed on during the gap, so a
+    missing marker is seen as missing rather than as an invented straight line.
+
+    Args:
+        frames_all: float ``(F,)``: the Blender frame of every sample index.
+        valid: bool ``(F,)``: where the track has a sample.
+        xyz: float ``(F, 3)``: positions in Blender units (ignored where not valid).
+        key_types: int ``(valid.sum(),)``: keyframe type enum values of the keys, or None.
+        group: channel group of new location F-curves.
+        hold_type: keyframe type of the visibility keys.
+
+    Returns:
+        the three location F-curves.
+    """
+    animio.ensure_action(obj, action)
+    idx = np.flatnonzero(valid)
+    const = animio.interpolation_value("CONSTANT")
+    interp = np.full(idx.shape[0], animio.interpolation_value("LINEAR"), dtype=np.int32)
+    # The last key before each gap holds its value instead of interpolating across the gap.
+    interp[:-1][np.diff(idx) > 1] = const
+    curves = []
+    for axis in range(3):
+        fc = animio.find_fcurve(obj, "location", axis) or animio.new_fcurve(obj, "location", axis, group=group)
+        animio.write_keys(fc, frames_all[idx], xyz[idx, axis], interp)
+        if key_types is not None and len(idx):
+            fc.keyframe_points.foreach_set("type", np.asarray(key_types, dtype=np.int32))
+        curves.append(fc)
+    if len(idx):
+        obj.location = xyz[idx[0]]
+    if not valid.all() or animio.find_fcurve(obj, "hide_viewport") is not None:
+        _key_visibility(obj, valid, frames_all, const, animio.key_type_value(hold_type))
+    return curves
+
+
+def _key_visibility(obj: bpy.types.Object, valid: np.ndarray, frames: np.ndarray, const: int, key_type: int) -> None:
     """Key hide_viewport/hide_render: 1 from the first missing frame of a gap, 0 when it ends."""
     change = np.flatnonzero(np.diff(valid.astype(np.int8))) + 1
     at = np.concatenate([[0], change])
     hidden = (~valid[at]).astype(np.float32)
     for path in ("hide_viewport", "hide_render"):
-        fc = animio.new_fcurve(obj, path, 0, group="Visibility")
+        fc = animio.find_fcurve(obj, path) or animio.new_fcurve(obj, path, 0, group="Visibility")
         animio.write_keys(fc, frames[at], hidden, np.full(at.shape[0], const, dtype=np.int32))
+        fc.keyframe_points.foreach_set("type", np.full(at.shape[0], key_type, dtype=np.int32))
+    obj.hide_viewport = obj.hide_render = bool(hidden[0])

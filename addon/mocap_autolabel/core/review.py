@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .labeling import NULL, Constraint, Labeling
+from .labeling import EMPTY, NULL, Constraint, Labeling, segments_from_runs
 
 #: Confidence classes, in the order of :data:`KEY_TYPES`.
 CONFIDENT, UNCERTAIN, VERY_UNCERTAIN, LOCKED = 0, 1, 2, 3
@@ -68,10 +68,13 @@ class Review:
         return int(seg[0])
 
     def _add(self, new: Constraint) -> Constraint:
-        # A newer decision on the same samples replaces the older one where they overlap.
+        # A newer decision replaces an older one where they overlap: on the same samples, or
+        # giving the same label to another slot (one label, one sample per frame).
         kept = []
         for c in self.constraints:
-            if c.slot != new.slot or c.stop <= new.start or c.start >= new.stop:
+            overlap = c.stop > new.start and c.start < new.stop
+            rival = c.slot == new.slot or (c.label == new.label != NULL)
+            if not (overlap and rival):
                 kept.append(c)
                 continue
             if c.start < new.start:
@@ -123,6 +126,100 @@ class Review:
     def from_dict(cls, data: dict) -> Review:
         return cls([Constraint(*(int(v) for v in c)) for c in data.get("constraints", [])],
                    [(int(a), int(b)) for a, b in data.get("splits", [])])
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Flat int arrays (``constraints``: ``(n * 4,)``, ``splits``: ``(s * 2,)``), for storage
+        where nested lists are not allowed (Blender custom properties)."""
+        return {"constraints": np.array([[c.slot, c.start, c.stop, c.label] for c in self.constraints],
+                                        dtype=np.int64).reshape(-1),
+                "splits": np.array(self.splits, dtype=np.int64).reshape(-1)}
+
+    @classmethod
+    def from_arrays(cls, constraints, splits) -> Review:
+        c = np.asarray(constraints, dtype=np.int64).reshape(-1, 4)
+        s = np.asarray(splits, dtype=np.int64).reshape(-1, 2)
+        return cls([Constraint(*(int(v) for v in row)) for row in c], [(int(a), int(b)) for a, b in s])
+
+
+def carrier(labeling: Labeling, label: int, frame: int) -> int | None:
+    """The slot that carries ``label`` at ``frame`` (0-based), or None."""
+    seg = np.flatnonzero((labeling.label == label) & (labeling.start <= frame) & (labeling.stop > frame))
+    return int(labeling.slot[seg[0]]) if len(seg) else None
+
+
+def _paint_flags(labeling: Labeling) -> np.ndarray:
+    return labeling._paint(labeling.locked, False, bool)
+
+
+def _rebuild(labeling: Labeling, per: np.ndarray, conf: np.ndarray, locked: np.ndarray,
+             cut: np.ndarray) -> Labeling:
+    """A Labeling from edited per-sample arrays: a segment starts at every old segment start, at
+    every ``cut`` and wherever the label changes; its confidence and lock come from its first sample."""
+    begin = np.zeros(per.shape, dtype=bool)
+    begin[labeling.start, labeling.slot] = True
+    out = segments_from_runs(labeling.names, per, per != EMPTY, dict(labeling.info), split=begin | cut)
+    out.confidence = conf[out.start, out.slot].astype(np.float32)
+    out.locked = locked[out.start, out.slot]
+    return out
+
+
+def apply_constraints(labeling: Labeling, constraints: list[Constraint]) -> Labeling:
+    """The labeling with the user's new decisions made, and nothing else changed.
+
+    Each constraint's samples get its label, confidence 1 and the lock. A label given to a slot is
+    taken from whichever other slot carried it in those frames: those samples become null with
+    confidence 0 (very uncertain: a re-solve may find them another label). Evidence is dropped
+    (it described the old segments).
+    """
+    per = labeling.per_sample()
+    conf = labeling.per_sample_confidence()
+    locked = _paint_flags(labeling)
+    changed = np.zeros(per.shape, dtype=bool)
+    for c in constraints:
+        rows = slice(c.start, c.stop)
+        here = np.zeros(per.shape, dtype=bool)
+        here[rows, c.slot] = per[rows, c.slot] != EMPTY
+        if c.label != NULL:
+            taken = np.zeros(per.shape, dtype=bool)
+            taken[rows] = per[rows] == c.label
+            taken &= ~here
+            per[taken], conf[taken], locked[taken] = NULL, 0.0, False
+            changed |= taken
+        per[here], conf[here], locked[here] = c.label, 1.0, True
+        changed |= here
+    # Cut wherever an edited run starts or ends, so edited samples never share a segment with others.
+    cut = np.zeros(per.shape, dtype=bool)
+    cut[1:] = changed[1:] != changed[:-1]
+    cut[0] = changed[0]
+    out = _rebuild(labeling, per, conf, locked, cut)
+    out.info["constraints"] = labeling.info.get("constraints", 0) + len(constraints)
+    return out
+
+
+def apply_split(labeling: Labeling, slot: int, frame: int) -> Labeling:
+    """The labeling with the segment of ``slot`` cut before ``frame`` (labels unchanged)."""
+    cut = np.zeros((labeling.n_frames, labeling.n_points), dtype=bool)
+    cut[frame, slot] = True
+    return _rebuild(labeling, labeling.per_sample(), labeling.per_sample_confidence(), _paint_flags(labeling), cut)
+
+
+def labeling_to_arrays(labeling: Labeling) -> dict:
+    """The Labeling as flat arrays plus its names and shape, for storage (see :func:`labeling_from_arrays`)."""
+    return {"names": list(labeling.names), "n_frames": labeling.n_frames, "n_points": labeling.n_points,
+            "slot": labeling.slot, "start": labeling.start, "stop": labeling.stop, "label": labeling.label,
+            "confidence": labeling.confidence, "locked": labeling.locked}
+
+
+def labeling_from_arrays(data, info: dict | None = None) -> Labeling:
+    """Inverse of :func:`labeling_to_arrays` (any mapping whose arrays numpy can read)."""
+    n = len(np.asarray(data["slot"]))
+    return Labeling(names=list(data["names"]), n_frames=int(data["n_frames"]), n_points=int(data["n_points"]),
+                    slot=np.asarray(data["slot"], dtype=np.int64)[:n],
+                    start=np.asarray(data["start"], dtype=np.int64)[:n],
+                    stop=np.asarray(data["stop"], dtype=np.int64)[:n],
+                    label=np.asarray(data["label"], dtype=np.int16)[:n],
+                    confidence=np.asarray(data["confidence"], dtype=np.float32)[:n],
+                    locked=np.asarray(data["locked"], dtype=bool)[:n], info=dict(info or {}))
 
 
 def changed_labels(before: Labeling, after: Labeling) -> np.ndarray:

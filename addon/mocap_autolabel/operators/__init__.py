@@ -1,6 +1,7 @@
 """Blender operators; each calls the core and the blender layer, nothing more."""
 
 from .import_markers import MOCAPAL_OT_import_markers
+from .review import classes as review_classes
 from .solve_hand import MOCAPAL_OT_solve_hand
 
-classes = (MOCAPAL_OT_import_markers, MOCAPAL_OT_solve_hand)
+classes = (MOCAPAL_OT_import_markers, MOCAPAL_OT_solve_hand) + review_classes

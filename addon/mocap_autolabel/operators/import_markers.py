@@ -62,6 +62,7 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
                 self.report({"ERROR"}, f"{path}: unexpected error while reading ({type(exc).__name__}: {exc})")
                 continue
             collection = build_take(take, context.scene, options)
+            context.scene.mocap_autolabel.take = collection  # the take the Mocap panel works on
             for warning in take.warnings:
                 self.report({"WARNING"}, f"{os.path.basename(path)}: {warning}")
             self.report({"INFO"}, f"Imported {len(collection.objects)} markers x {take.n_frames} frames "

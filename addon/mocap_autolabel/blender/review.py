@@ -1,0 +1,482 @@
+"""A labeled take in the scene: labeled and unlabeled empties keyed by confidence, and the review state.
+
+The take collection made by the importer (``scene.build_take``) holds the whole review:
+
+- its raw empties (moved into a hidden "Raw" child collection at the first labeling): the
+  take is read back from them, so a saved .blend is a complete review without the source file;
+- a "Labeled" child collection: one empty per layout marker, keyed where the label has a sample,
+  with keyframe types by confidence class and channel groups coloured by finger;
+- an "Unlabeled" child collection: one empty per point slot that has unassigned samples;
+- custom properties ``mocap_labeling`` (the Labeling's arrays), ``mocap_review`` (the
+  constraints and splits) and ``mocap_settings`` (layout, method...): saved with the file and
+  restored by undo together with the keys.
+
+Nothing here decides labels: that is ``core.pipeline`` and ``core.review``.
+"""
+
+from __future__ import annotations
+
+import json
+import uuid
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from ..core.labeling import EMPTY, NULL, Labeling
+from ..core.layout import Layout, load_layout
+from ..core.review import (
+    CLASS_NAMES,
+    KEY_TYPES,
+    Review,
+    labeling_from_arrays,
+    labeling_to_arrays,
+    marker_classes,
+    segment_classes,
+)
+from ..core.take import Take
+from . import animio
+from .scene import key_track, new_marker
+
+#: Channel-group colour set of each digit (Blender's bone colour sets: red, orange, green,
+#: blue, violet, grey); the viewport overlay draws the same colours.
+FINGER_COLOR_SETS = {"thumb": "THEME01", "index": "THEME02", "middle": "THEME03", "ring": "THEME04",
+                     "little": "THEME06", "palm": "THEME13"}
+FINGERS = tuple(FINGER_COLOR_SETS)
+
+
+def finger_of(layout: Layout, label: int) -> str:
+    """The digit a layout marker sits on (``thumb`` ... ``little``), or ``palm``."""
+    bone = layout.markers[label].bone
+    return "palm" if bone == "palm" else bone.split("_")[0]
+
+
+def key_type_values() -> np.ndarray:
+    """int ``(4,)``: the keyframe type enum value of each confidence class."""
+    return np.array([animio.key_type_value(t) for t in KEY_TYPES], dtype=np.int32)
+
+
+# --- finding the take -----------------------------------------------------------------------
+
+def take_collection(obj_or_collection) -> bpy.types.Collection | None:
+    """The imported take collection an object or collection belongs to (or None)."""
+    if obj_or_collection is None:
+        return None
+    if isinstance(obj_or_collection, bpy.types.Collection):
+        colls = [obj_or_collection]
+    else:
+        colls = list(obj_or_collection.users_collection)
+    for coll in colls:
+        if "mocap_source" in coll:
+            return coll
+        owner = coll.get("mocap_take")
+        if owner is not None and "mocap_source" in owner:
+            return owner
+    return None
+
+
+def _child(take_coll: bpy.types.Collection, key: str, name: str) -> bpy.types.Collection:
+    coll = take_coll.get(key)
+    if coll is None or coll.name not in bpy.data.collections:
+        coll = bpy.data.collections.new(name)
+        take_coll.children.link(coll)
+        coll["mocap_take"] = take_coll
+        take_coll[key] = coll
+    return coll
+
+
+def raw_markers(take_coll: bpy.types.Collection) -> list[bpy.types.Object]:
+    """The imported (raw) empties of the take, by slot."""
+    raw = take_coll.get("mocap_raw")
+    objs = list(take_coll.objects) + (list(raw.objects) if raw is not None else [])
+    return sorted((o for o in objs if "mocap_slot" in o and "mocap_label" not in o and "mocap_null" not in o),
+                  key=lambda o: o["mocap_slot"])
+
+
+def first_frame(take_coll: bpy.types.Collection) -> int:
+    """The Blender frame of the take's sample 0."""
+    return int(take_coll.get("mocap_first", 1))
+
+
+def read_take(take_coll: bpy.types.Collection) -> Take:
+    """The take as the scene holds it, read back from the raw empties' keys (metres).
+
+    Slot numbers are the importer's, so labels and constraints keep meaning the same samples.
+    """
+    objs = raw_markers(take_coll)
+    scale = float(take_coll.get("mocap_scale", 1.0))
+    first = first_frame(take_coll)
+    keyed = []
+    last = -1
+    for obj in objs:
+        curves = [animio.find_fcurve(obj, "location", axis) for axis in range(3)]
+        if any(c is None for c in curves):
+            keyed.append((obj, None, None))
+            continue
+        frames, x = animio.read_keys(curves[0])
+        xyz = np.stack([x, animio.read_keys(curves[1])[1], animio.read_keys(curves[2])[1]], axis=1)
+        idx = np.rint(frames).astype(np.int64) - first
+        keyed.append((obj, idx, xyz))
+        if len(idx):
+            last = max(last, int(idx.max()))
+    n_points = (max(int(o["mocap_slot"]) for o in objs) + 1) if objs else 0
+    positions = np.full((last + 1, n_points, 3), np.nan, dtype=np.float32)
+    names = [f"*{i}" for i in range(n_points)]
+    for obj, idx, xyz in keyed:
+        slot = int(obj["mocap_slot"])
+        names[slot] = obj.get("mocap_point", obj.name)
+        if idx is not None:
+            positions[idx, slot] = xyz / scale
+    return Take(positions=positions, names=names, rate=float(take_coll.get("mocap_rate", 100.0)),
+                first_frame=first, source=take_coll.get("mocap_source", ""))
+
+
+# --- the stored review state ------------------------------------------------------------------
+
+@dataclass
+class ReviewState:
+    """What the take collection stores: the labeling, the corrections and how labels were made."""
+
+    labeling: Labeling
+    review: Review
+    layout: str
+    method: str
+    temporal: str
+    token: str = ""
+
+
+def has_review(take_coll: bpy.types.Collection) -> bool:
+    return take_coll is not None and "mocap_labeling" in take_coll
+
+
+def store_state(take_coll: bpy.types.Collection, state: ReviewState) -> None:
+    """Write the state into the collection's custom properties (a new token marks the change)."""
+    arrays = labeling_to_arrays(state.labeling)
+    take_coll["mocap_labeling"] = {
+        "names": "\n".join(arrays.pop("names")), "n_frames": arrays.pop("n_frames"),
+        "n_points": arrays.pop("n_points"),
+        **{k: np.asarray(v, dtype=np.float64 if k == "confidence" else np.int64).tolist() for k, v in arrays.items()},
+    }
+    rev = state.review.to_arrays()
+    take_coll["mocap_review"] = {k: v.tolist() for k, v in rev.items()}
+    state.token = uuid.uuid4().hex
+    info = {k: v for k, v in state.labeling.info.items() if isinstance(v, (str, int, float, bool, dict, list))}
+    take_coll["mocap_settings"] = {"layout": state.layout, "method": state.method, "temporal": state.temporal,
+                                   "token": state.token, "info": json.dumps(info, default=str)}
+
+
+def load_state(take_coll: bpy.types.Collection) -> ReviewState:
+    """The stored state (raises KeyError when the take was never labeled)."""
+    data = take_coll["mocap_labeling"]
+    settings = take_coll["mocap_settings"]
+    arrays = {k: np.asarray(data[k]) for k in ("slot", "start", "stop", "label", "confidence", "locked")}
+    labeling = labeling_from_arrays({**arrays, "names": str(data["names"]).split("\n"),
+                                     "n_frames": data["n_frames"], "n_points": data["n_points"]},
+                                    info=json.loads(settings.get("info", "{}")))
+    rev = take_coll.get("mocap_review") or {}
+    review = Review.from_arrays(np.asarray(rev.get("constraints", [])), np.asarray(rev.get("splits", [])))
+    return ReviewState(labeling, review, str(settings["layout"]), str(settings["method"]),
+                       str(settings["temporal"]), str(settings.get("token", "")))
+
+
+def state_layout(state: ReviewState) -> Layout:
+    return load_layout(state.layout)
+
+
+# --- writing labels into the scene ----------------------------------------------------------
+
+def _labeled_objects(coll: bpy.types.Collection) -> dict[int, bpy.types.Object]:
+    return {int(o["mocap_label"]): o for o in coll.objects if "mocap_label" in o}
+
+
+def _null_objects(coll: bpy.types.Collection) -> dict[int, bpy.types.Object]:
+    return {int(o["mocap_null"]): o for o in coll.objects if "mocap_null" in o}
+
+
+def _hide_raw(take_coll: bpy.types.Collection) -> None:
+    """Move the imported empties into a hidden "Raw" child: the labeled and unlabeled empties
+    now show every sample, each once."""
+    raw = _child(take_coll, "mocap_raw", "Raw")
+    for obj in list(take_coll.objects):
+        if "mocap_slot" in obj:
+            raw.objects.link(obj)
+            take_coll.objects.unlink(obj)
+    raw.hide_viewport = raw.hide_render = True
+
+
+def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, labeling: Labeling,
+                   previous: Labeling | None = None) -> dict[str, int]:
+    """Show ``labeling`` in the scene; with ``previous``, rewrite only the markers that changed.
+
+    Each labeled empty is keyed where its label has a sample; each key's type is its confidence
+    class (:data:`core.review.KEY_TYPES`). Slots with unassigned samples get an empty in
+    "Unlabeled", keyed the same way.
+
+    Returns:
+        counts of rewritten labeled and unlabeled empties.
+    """
+    _hide_raw(take_coll)
+    labeled = _child(take_coll, "mocap_labeled", "Labeled")
+    unlabeled = _child(take_coll, "mocap_unlabeled", "Unlabeled")
+    scale = float(take_coll.get("mocap_scale", 1.0))
+    frames_all = np.arange(take.n_frames, dtype=np.float32) + first_frame(take_coll)
+    types = key_type_values()
+    per = labeling.per_sample()
+    classes = marker_classes(labeling)
+    m = len(layout)
+    if previous is not None and (previous.names != labeling.names or previous.per_sample().shape != per.shape):
+        previous = None
+    before = previous.per_sample() if previous is not None else None
+
+    # Labeled markers: (F, M, 3) positions in layout order.
+    f, s = np.nonzero(per >= 0)
+    xyz = np.full((take.n_frames, m, 3), np.nan, dtype=np.float32)
+    xyz[f, per[f, s]] = take.positions[f, s] * scale
+    if previous is None:
+        todo = range(m)
+    else:
+        old = marker_classes(previous)
+        moved = set(np.unique(before[before != per])) | set(np.unique(per[before != per]))
+        moved |= set(np.flatnonzero((old != classes).any(axis=0)))
+        todo = sorted(int(v) for v in moved if v >= 0)
+    objs = _labeled_objects(labeled)
+    for label in todo:
+        obj = objs.get(label)
+        finger = finger_of(layout, label)
+        if obj is None:
+            obj = new_marker(layout.names[label], labeled, scale)
+            obj["mocap_label"] = label
+            obj.color = (*theme_color(finger), 1.0)
+        valid = classes[:, label] >= 0
+        curves = key_track(obj, frames_all, valid, xyz[:, label], types[classes[valid, label]],
+                           group=finger.title(), action=f"{take_coll.name}|{obj.name}", hold_type="MOVING_HOLD")
+        for fc in curves:
+            if fc.group is not None and fc.group.color_set != FINGER_COLOR_SETS[finger]:
+                fc.group.color_set = FINGER_COLOR_SETS[finger]
+
+    # Unlabeled samples, one empty per slot that has any.
+    seg_class = segment_classes(labeling)
+    null_class = labeling._paint(seg_class, -1, np.int8)
+    null_class[per != NULL] = -1
+    if previous is None:
+        slots = np.flatnonzero((null_class >= 0).any(axis=0))
+    else:
+        old_null = previous._paint(segment_classes(previous), -1, np.int8)
+        old_null[before != NULL] = -1
+        slots = np.flatnonzero((old_null != null_class).any(axis=0))
+    nulls = _null_objects(unlabeled)
+    for slot in slots:
+        valid = null_class[:, slot] >= 0
+        obj = nulls.get(int(slot))
+        if obj is None:
+            if not valid.any():
+                continue
+            obj = new_marker(f"*{slot}", unlabeled, scale)
+            obj["mocap_null"] = int(slot)
+            obj["mocap_point"] = take.names[slot]
+        key_track(obj, frames_all, valid, take.positions[:, slot] * scale, types[null_class[valid, slot]],
+                  action=f"{take_coll.name}|{obj.name}", hold_type="MOVING_HOLD")
+    return {"labeled": len(todo), "unlabeled": len(slots)}
+
+
+def theme_color(finger: str) -> tuple[float, float, float]:
+    """The RGB of a digit's colour set in the current theme."""
+    index = int(FINGER_COLOR_SETS[finger][5:]) - 1
+    return tuple(bpy.context.preferences.themes[0].bone_color_sets[index].normal)
+
+
+# --- what the reviewer points at --------------------------------------------------------------
+
+def sample_index(take_coll: bpy.types.Collection, frame: int) -> int:
+    """The take's sample index (0-based) of a Blender frame."""
+    return int(frame) - first_frame(take_coll)
+
+
+def slot_of(obj: bpy.types.Object, labeling: Labeling, index: int) -> int | None:
+    """The point slot an empty shows at sample ``index`` (None where it shows nothing)."""
+    if not 0 <= index < labeling.n_frames:
+        return None
+    if "mocap_label" in obj:
+        per = labeling.per_sample()[index]
+        hit = np.flatnonzero(per == int(obj["mocap_label"]))
+        return int(hit[0]) if len(hit) else None
+    for key in ("mocap_null", "mocap_slot"):
+        if key in obj:
+            slot = int(obj[key])
+            return slot if labeling.per_sample()[index, slot] != EMPTY else None
+    return None
+
+
+def object_for(take_coll: bpy.types.Collection, labeling: Labeling, segment: int) -> bpy.types.Object | None:
+    """The empty that shows a segment: the labeled marker, or the slot's unlabeled empty."""
+    label = int(labeling.label[segment])
+    if label >= 0:
+        coll = take_coll.get("mocap_labeled")
+        return _labeled_objects(coll).get(label) if coll is not None else None
+    coll = take_coll.get("mocap_unlabeled")
+    return _null_objects(coll).get(int(labeling.slot[segment])) if coll is not None else None
+
+
+def summary(labeling: Labeling, sure: float) -> dict:
+    """The panel's figures: labels present, share of labeled samples that are confident, uncertain segments."""
+    s = labeling.summary(sure)
+    present = np.unique(labeling.label[labeling.label >= 0])
+    return {"labels": f"{len(present)} / {len(labeling.names)}", "confident": s["confident_share"] * 100,
+            "uncertain": int(((labeling.label >= 0) & (labeling.confidence < sure) & ~labeling.locked).sum()),
+            "locked": int(labeling.locked.sum())}
+
+
+def legend() -> list[tuple[str, str]]:
+    """(keyframe type, what it means) for the panel's legend."""
+    return list(zip(KEY_TYPES, CLASS_NAMES, strict=True))
+
+
+# --- viewport overlay geometry (drawn by ui/overlay.py; pure so tests can call it) -----------
+
+def overlay_geometry(take_coll: bpy.types.Collection, layout: Layout, classes: np.ndarray, index: int,
+                     sticks: bool = True) -> dict[str, np.ndarray]:
+    """Points, colours and stick segments for the layout's markers at sample ``index``.
+
+    Args:
+        classes: int8 ``(F, M)`` marker classes (:func:`core.review.marker_classes`).
+
+    Returns:
+        ``points`` ``(n, 3)`` world positions, ``colors`` ``(n, 4)`` finger colours, ``uncertain``
+        ``(u, 3)`` positions to ring, ``ring_colors`` ``(u, 4)``, ``lines`` ``(2 s, 3)`` stick ends.
+    """
+    coll = take_coll.get("mocap_labeled")
+    objs = _labeled_objects(coll) if coll is not None else {}
+    ok = 0 <= index < classes.shape[0]
+    pos = np.full((len(layout), 3), np.nan, dtype=np.float32)
+    cls = np.full(len(layout), -1, dtype=np.int8)
+    for label, obj in objs.items():
+        if ok and label < len(layout) and classes[index, label] >= 0:
+            pos[label] = obj.matrix_world.translation
+            cls[label] = classes[index, label]
+    shown = np.flatnonzero(cls >= 0)
+    fingers = [finger_of(layout, i) for i in range(len(layout))]
+    colors = np.array([(*theme_color(fingers[i]), 1.0) for i in shown], dtype=np.float32).reshape(-1, 4)
+    ring = {1: (0.3, 0.8, 1.0, 1.0), 2: (1.0, 0.25, 0.45, 1.0)}  # the Dope Sheet's breakdown / extreme hues
+    unsure = shown[(cls[shown] == 1) | (cls[shown] == 2)]
+    lines = []
+    if sticks:
+        for finger in FINGERS[:-1]:
+            chain = [i for i in range(len(layout)) if fingers[i] == finger and cls[i] >= 0]
+            chain.sort(key=lambda i: (layout.markers[i].bone.endswith(("prox", "mid", "dist")),
+                                      ("meta", "prox", "mid", "dist").index(layout.markers[i].bone.split("_")[1]),
+                                      layout.markers[i].along))
+            for a, b in zip(chain[:-1], chain[1:]):
+                lines += [pos[a], pos[b]]
+    return {"points": pos[shown], "colors": colors, "uncertain": pos[unsure],
+            "ring_colors": np.array([ring[int(c)] for c in cls[unsure]], dtype=np.float32).reshape(-1, 4),
+            "lines": np.array(lines, dtype=np.float32).reshape(-1, 3)}
+
+
+
+# --- labeling a take of the scene: prepared on the main thread, run anywhere, finished on the main thread
+
+def current_take(take_coll: bpy.types.Collection) -> Take:
+    """The take of the scene, read once per session (re-read when its raw empties change)."""
+    from .session import session
+
+    cache = session(take_coll)
+    objs = raw_markers(take_coll)
+    key = (len(objs), first_frame(take_coll), float(take_coll.get("mocap_scale", 1.0)),
+           sum(len(animio.fcurves_of(o)) for o in objs))
+    if cache.take is None or cache.take_key != key:
+        if not objs:
+            from ..core.errors import MocapInputError
+
+            raise MocapInputError(take_coll.name, "the take has no imported marker empties to label")
+        cache.take, cache.take_key = read_take(take_coll), key
+    return cache.take
+
+
+@dataclass
+class LabelRequest:
+    """Everything a labeling run needs, gathered from the scene so that :meth:`run` touches no Blender data."""
+
+    take_name: str
+    take: Take
+    layout: Layout
+    layout_ref: str
+    method: str
+    temporal: str
+    review: Review
+    previous: Labeling | None
+    labeler: object
+
+    def run(self, say=None) -> Labeling:
+        from ..core.pipeline import label_take
+
+        return label_take(self.take, self.layout, method=self.method, temporal=self.temporal,
+                          constraints=self.review.constraints, splits=self.review.splits,
+                          labeler=self.labeler, progress=say)
+
+
+def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None, method: str | None = None,
+                  temporal: str | None = None) -> LabelRequest:
+    """A labeling run for the take; settings default to those it was labeled with before.
+
+    A take labeled before keeps its corrections when it is labeled again with the same layout;
+    with another layout they no longer mean anything and are dropped.
+    """
+    from ..core.labelers import make_labeler
+    from .session import labeler
+
+    state = load_state(take_coll) if has_review(take_coll) else None
+    layout_ref = layout_ref or (state.layout if state else "han19")
+    method = method or (state.method if state else "set")
+    temporal = temporal or (state.temporal if state else "vote")
+    layout = load_layout(layout_ref)
+    keep = state is not None and state.layout == layout_ref
+    review = state.review if keep else Review()
+    previous = state.labeling if keep else None
+    take = current_take(take_coll)
+    lab = None
+    if method in ("set", "perm", "cnn"):
+        lab = labeler(take_coll, method, layout, lambda: make_labeler(method, layout))
+    return LabelRequest(take_coll.name, take, layout, layout_ref, method, temporal, review, previous, lab)
+
+
+def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, request: LabelRequest,
+                 labeling: Labeling) -> dict:
+    """Show a finished labeling and store it with the request's corrections."""
+
+    if request.previous is None and has_review(take_coll):
+        _clear_labels(take_coll)  # labeled before with another layout
+    counts = write_labeling(take_coll, request.take, request.layout, labeling, request.previous)
+    commit(scene, take_coll, ReviewState(labeling, request.review, request.layout_ref, request.method,
+                                         request.temporal))
+    return counts
+
+
+def commit(scene: bpy.types.Scene, take_coll: bpy.types.Collection, state: ReviewState) -> None:
+    """Store the state on the take and make it the scene's reviewed take."""
+    from .properties import refresh_uncertain
+
+    store_state(take_coll, state)
+    settings = scene.mocap_autolabel
+    if settings.take != take_coll:
+        settings.take = take_coll  # its update rebuilds the list
+    refresh_uncertain(scene, take_coll, state.labeling)
+
+
+def edit(scene: bpy.types.Scene, take_coll: bpy.types.Collection, state: ReviewState, labeling: Labeling) -> dict:
+    """Show an edited labeling (rewriting only what changed) and store it."""
+    counts = write_labeling(take_coll, current_take(take_coll), state_layout(state), labeling, state.labeling)
+    state.labeling = labeling
+    commit(scene, take_coll, state)
+    return counts
+
+
+def _clear_labels(take_coll: bpy.types.Collection) -> None:
+    for key in ("mocap_labeled", "mocap_unlabeled"):
+        coll = take_coll.get(key)
+        if coll is None:
+            continue
+        for obj in list(coll.objects):
+            action = obj.animation_data.action if obj.animation_data else None
+            bpy.data.objects.remove(obj)
+            if action is not None and action.users == 0:
+                bpy.data.actions.remove(action)

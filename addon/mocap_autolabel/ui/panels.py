@@ -1,0 +1,114 @@
+"""The Mocap tab of the 3D View sidebar: label a take, see what needs review, fix it."""
+
+from __future__ import annotations
+
+import bpy
+
+#: Icon of each keyframe type in the legend.
+_KEY_ICONS = {"KEYFRAME": "KEYTYPE_KEYFRAME_VEC", "BREAKDOWN": "KEYTYPE_BREAKDOWN_VEC",
+              "EXTREME": "KEYTYPE_EXTREME_VEC", "JITTER": "KEYTYPE_JITTER_VEC"}
+#: Colour-set icon of each finger (Blender's bone colour set icons).
+_FINGER_ICONS = {"THEME01": "COLORSET_01_VEC", "THEME02": "COLORSET_02_VEC", "THEME03": "COLORSET_03_VEC",
+                 "THEME04": "COLORSET_04_VEC", "THEME06": "COLORSET_06_VEC", "THEME13": "COLORSET_13_VEC"}
+
+
+class _Sidebar:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Mocap"
+
+
+class MOCAPAL_UL_uncertain(bpy.types.UIList):
+    """Uncertain segments, worst first: label, frames, confidence."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        row = layout.row(align=True)
+        row.label(text=item.label, icon="KEYTYPE_EXTREME_VEC" if item.confidence < 0.5 else "KEYTYPE_BREAKDOWN_VEC")
+        row.label(text=f"{item.frame_start}-{item.frame_end}")
+        row.label(text=f"{item.confidence * 100:.0f} %")
+
+
+class MOCAPAL_PT_label(_Sidebar, bpy.types.Panel):
+    bl_label = "Label"
+
+    def draw(self, context):
+        settings = context.scene.mocap_autolabel
+        col = self.layout.column()
+        col.use_property_split = True
+        col.use_property_decorate = False
+        col.prop(settings, "take")
+        col.prop(settings, "layout")
+        col.prop(settings, "layout_file")
+        col.prop(settings, "method")
+        col.prop(settings, "temporal")
+        col.operator("mocap_autolabel.label", icon="SORTALPHA")
+        col.operator("mocap_autolabel.solve_hand", icon="VIEW_PAN")
+
+
+class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
+    bl_label = "Review"
+
+    def draw(self, context):
+        from ..blender.review import has_review, load_state, summary
+
+        layout = self.layout
+        settings = context.scene.mocap_autolabel
+        if not has_review(settings.take):
+            layout.label(text="Label a take to review it", icon="INFO")
+            return
+        s = summary(load_state(settings.take).labeling, settings.sure)
+        box = layout.box()
+        box.label(text=f"Labels present: {s['labels']}")
+        box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
+        box.label(text=f"Uncertain segments: {s['uncertain']}   Locked: {s['locked']}")
+        row = layout.row(align=True)
+        row.operator("mocap_autolabel.next_uncertain", text="Previous", icon="TRIA_LEFT").previous = True
+        row.operator("mocap_autolabel.next_uncertain", text="Next", icon="TRIA_RIGHT").previous = False
+        layout.template_list("MOCAPAL_UL_uncertain", "", settings, "uncertain", settings, "uncertain_index", rows=6)
+        if settings.uncertain_total > len(settings.uncertain):
+            layout.label(text=f"Showing the worst {len(settings.uncertain)} of {settings.uncertain_total}")
+        layout.prop(settings, "sure", slider=True)
+
+
+class MOCAPAL_PT_relabel(_Sidebar, bpy.types.Panel):
+    bl_label = "Relabel"
+    bl_parent_id = "MOCAPAL_PT_review"
+
+    def draw(self, context):
+        settings = context.scene.mocap_autolabel
+        col = self.layout.column(align=True)
+        col.operator("mocap_autolabel.assign_label", icon="SORTALPHA")
+        col.operator("mocap_autolabel.swap_labels", icon="UV_SYNC_SELECT")
+        col.operator("mocap_autolabel.unlabel", icon="GHOST_ENABLED")
+        col.operator("mocap_autolabel.split", icon="SCULPTMODE_HLT")
+        col.operator("mocap_autolabel.lock", icon="LOCKED")
+        col.separator()
+        col.prop(settings, "auto_resolve")
+        col.operator("mocap_autolabel.resolve", icon="FILE_REFRESH")
+        col.operator("mocap_autolabel.export_labeled", icon="EXPORT")
+
+
+class MOCAPAL_PT_legend(_Sidebar, bpy.types.Panel):
+    bl_label = "Legend"
+    bl_parent_id = "MOCAPAL_PT_review"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        from ..blender.review import FINGER_COLOR_SETS, legend
+
+        layout = self.layout
+        settings = context.scene.mocap_autolabel
+        layout.label(text="Keyframe types (Dope Sheet, Timeline):")
+        for key_type, meaning in legend():
+            layout.label(text=meaning.capitalize(), icon=_KEY_ICONS[key_type])
+        layout.label(text="Channel groups and viewport, by finger:")
+        grid = layout.grid_flow(columns=3, even_columns=True)
+        for finger, color_set in FINGER_COLOR_SETS.items():
+            grid.label(text=finger.capitalize(), icon=_FINGER_ICONS[color_set])
+        row = layout.row()
+        row.prop(settings, "show_overlay")
+        row.prop(settings, "show_sticks")
+        layout.label(text="Dope Sheet: View > Show Group Colors", icon="INFO")
+
+
+classes = (MOCAPAL_UL_uncertain, MOCAPAL_PT_label, MOCAPAL_PT_review, MOCAPAL_PT_relabel, MOCAPAL_PT_legend)
