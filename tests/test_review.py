@@ -86,3 +86,67 @@ def test_lock_keeps_a_segment_and_errors_are_clear(labeled):
             review.unlabel(lab, slot, int(empty_slot_frames[0]))
     with pytest.raises(ValueError, match="already starts"):
         review.split(lab, slot, int(lab.start[0]))
+
+
+def test_apply_constraints_changes_only_the_constrained_samples(labeled):
+    from mocap_autolabel.core.review import apply_constraints, apply_split
+
+    _, take, _, lab = labeled
+    per = lab.per_sample()
+    frame = 300
+    slot = int(np.flatnonzero(per[frame] == 2)[0])
+    seg = int(np.flatnonzero((lab.slot == slot) & (lab.start <= frame) & (lab.stop > frame))[0])
+    stop = int(lab.stop[seg])
+    c = Constraint(slot, frame, stop, 7)
+    out = apply_constraints(lab, [c])
+    expected = per.copy()
+    block = expected[frame:stop]
+    took = block == 7
+    took[:, slot] = False
+    block[took] = NULL
+    block[:, slot] = np.where(block[:, slot] == -2, -2, 7)
+    np.testing.assert_array_equal(out.per_sample(), expected)
+    # The constrained samples are locked and sure; the samples that lost label 7 are very uncertain.
+    conf = out.per_sample_confidence()
+    valid = per[frame:stop, slot] != -2
+    assert (conf[frame:stop, slot][valid] == 1.0).all()
+    assert (conf[frame:stop][took] == 0.0).all()
+    assert (segment_classes(out)[out.locked] == LOCKED).all() and out.locked.sum() >= 1
+    # Elsewhere every sample keeps its label and confidence.
+    same = np.ones_like(per, dtype=bool)
+    same[frame:stop] = False
+    np.testing.assert_array_equal(conf[same], lab.per_sample_confidence()[same])
+    # A split cuts one segment in two and changes no label.
+    cut = apply_split(lab, slot, frame)
+    assert len(cut) == len(lab) + 1
+    np.testing.assert_array_equal(cut.per_sample(), per)
+    assert ((cut.slot == slot) & (cut.start == frame)).sum() == 1
+
+
+def test_review_round_trips_through_flat_arrays(labeled):
+    from mocap_autolabel.core.review import labeling_from_arrays, labeling_to_arrays
+
+    _, _, _, lab = labeled
+    review = Review([Constraint(1, 2, 30, 4), Constraint(3, 0, 9, NULL)], [(2, 17)])
+    arrays = review.to_arrays()
+    assert Review.from_arrays(arrays["constraints"], arrays["splits"]) == review
+    assert Review.from_arrays([], []) == Review()
+    back = labeling_from_arrays(labeling_to_arrays(lab))
+    np.testing.assert_array_equal(back.per_sample(), lab.per_sample())
+    np.testing.assert_array_equal(back.confidence, lab.confidence)
+
+
+def test_a_newer_label_replaces_an_older_constraint_on_another_slot(labeled):
+    _, _, _, lab = labeled
+    review = Review()
+    per = lab.per_sample()
+    frame = 100
+    s1, s2 = (int(np.flatnonzero(per[frame] == m)[0]) for m in (3, 4))
+    first = review.assign(lab, s1, frame, 9)
+    second = review.assign(lab, s2, frame, 9)
+    # Two slots cannot both be label 9 in the same frames: the older constraint keeps only what
+    # lies outside the newer one.
+    for c in review.constraints:
+        if c.slot == s1:
+            assert c.stop <= second.start or c.start >= second.stop
+    assert review.constraints[-1] == second and first.label == 9

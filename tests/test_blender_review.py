@@ -1,0 +1,334 @@
+"""Review in Blender (bpy module): label a synthetic take, check the colours, correct, re-solve, save."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mocap_autolabel.core.formats.c3d import write_c3d
+from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.review import KEY_TYPES, LOCKED, marker_classes, segment_classes, uncertain_segments
+from mocap_autolabel.core.synth.generate import synthesize
+
+FRAMES = 600
+
+
+@pytest.fixture(scope="module")
+def take_file(tmp_path_factory):
+    layout = load_layout("han19")
+    take = synthesize(layout, FRAMES, seed=3).take
+    path = tmp_path_factory.mktemp("review") / "syn.c3d"
+    write_c3d(take, path)
+    return path
+
+
+@pytest.fixture
+def labeled(empty_scene, bpy_module, take_file, tmp_path):
+    import shutil
+
+    bpy = bpy_module
+    path = shutil.copy(take_file, tmp_path / "syn.c3d")  # a test may remove it
+    bpy.ops.mocap_autolabel.import_markers(filepath=str(path))
+    settings = empty_scene.mocap_autolabel
+    settings.layout = "han19"
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    return bpy, settings.take
+
+
+def state(coll):
+    from mocap_autolabel.blender.review import load_state
+
+    return load_state(coll)
+
+
+def labeled_objects(coll):
+    return {int(o["mocap_label"]): o for o in coll["mocap_labeled"].objects}
+
+
+def key_types(obj) -> tuple[np.ndarray, np.ndarray]:
+    from mocap_autolabel.blender import animio
+
+    fc = animio.find_fcurve(obj, "location", 0)
+    frames, _ = animio.read_keys(fc)
+    return frames, animio.read_key_types(fc)
+
+
+def assert_scene_shows(coll, labeling):
+    """Every labeled empty is keyed exactly where its label has a sample, at that sample's
+    position, with the key type of the sample's confidence class; likewise the unlabeled empties."""
+    from mocap_autolabel.blender import animio
+    from mocap_autolabel.blender.review import current_take, first_frame, key_type_values
+
+    take = current_take(coll)
+    first = first_frame(coll)
+    per = labeling.per_sample()
+    classes = marker_classes(labeling)
+    types = key_type_values()
+    for label, obj in labeled_objects(coll).items():
+        frames, got = key_types(obj)
+        idx = np.flatnonzero(per == label) // per.shape[1]
+        slots = np.flatnonzero(per == label) % per.shape[1]
+        np.testing.assert_array_equal(frames, idx + first, err_msg=labeling.names[label])
+        np.testing.assert_array_equal(got, types[classes[idx, label]], err_msg=labeling.names[label])
+        _, x = animio.read_keys(animio.find_fcurve(obj, "location", 0))
+        np.testing.assert_allclose(x, take.positions[idx, slots, 0], atol=1e-6)
+    seg_class = labeling._paint(segment_classes(labeling), -1, np.int8)
+    for obj in coll["mocap_unlabeled"].objects:
+        slot = int(obj["mocap_null"])
+        frames, got = key_types(obj)
+        idx = np.flatnonzero(per[:, slot] == NULL)
+        np.testing.assert_array_equal(frames, idx + first)
+        np.testing.assert_array_equal(got, types[seg_class[idx, slot]])
+
+
+def test_label_writes_collections_key_types_and_list(labeled):
+    bpy, coll = labeled
+    st = state(coll)
+    lab = st.labeling
+    assert (st.layout, st.method, st.temporal) == ("han19", "set", "vote")
+    assert coll["mocap_raw"].hide_viewport and len(coll["mocap_raw"].objects) == lab.n_points
+    assert sorted(labeled_objects(coll)) == sorted(np.unique(lab.label[lab.label >= 0]).tolist())
+    assert {o.name for o in coll["mocap_labeled"].objects} <= set(lab.names)
+    assert_scene_shows(coll, lab)
+    # Finger colours on the channel groups.
+    obj = labeled_objects(coll)[lab.names.index("IndexTip")]
+    from mocap_autolabel.blender import animio
+
+    assert animio.find_fcurve(obj, "location", 0).group.color_set == "THEME02"
+    # The uncertain list is the Labeling's uncertain segments, worst first.
+    items = bpy.context.scene.mocap_autolabel.uncertain
+    expected = uncertain_segments(lab)
+    assert len(items) == len(expected) > 0
+    assert [(i.slot, i.frame_start - 1, i.label) for i in items] == \
+        [(int(lab.slot[s]), int(lab.start[s]), lab.names[lab.label[s]]) for s in expected]
+
+
+def _slot_and_segment(lab, label, frame):
+    per = lab.per_sample()
+    slot = int(np.flatnonzero(per[frame] == label)[0])
+    seg = int(np.flatnonzero((lab.slot == slot) & (lab.start <= frame) & (lab.stop > frame))[0])
+    return slot, seg
+
+
+def _select(bpy, *objs):
+    for o in bpy.context.selected_objects:
+        o.select_set(False)
+    for o in objs:
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = objs[0]
+
+
+def _long_segment_frame(lab, label):
+    """A frame inside (not at the start of) the longest segment of ``label``."""
+    seg = np.flatnonzero(lab.label == label)
+    seg = seg[np.argmax(lab.length[seg])]
+    return int(lab.start[seg] + lab.length[seg] // 3)
+
+
+def test_assign_changes_exactly_the_expected_frames(labeled):
+    bpy, coll = labeled
+    before = state(coll).labeling
+    a, b = before.names.index("IndexTip"), before.names.index("MiddleTip")
+    frame = _long_segment_frame(before, a)
+    slot, seg = _slot_and_segment(before, a, frame)
+    stop = int(before.stop[seg])
+    _select(bpy, labeled_objects(coll)[a])
+    bpy.context.scene.frame_set(frame + 1)
+    assert bpy.ops.mocap_autolabel.assign_label(label=str(b)) == {"FINISHED"}
+    after = state(coll)
+    assert after.review.constraints == [Constraint(slot, frame, stop, b)]
+    pb, pa = before.per_sample(), after.labeling.per_sample()
+    expected = pb.copy()
+    rows = slice(frame, stop)
+    took = expected[rows] == b
+    took[:, slot] = False
+    expected[rows][took] = NULL
+    expected[rows, slot] = b
+    np.testing.assert_array_equal(pa, expected)
+    assert after.labeling.locked[(after.labeling.slot == slot) & (after.labeling.start == frame)].all()
+    assert_scene_shows(coll, after.labeling)
+
+
+def test_swap_unlabel_lock_split(labeled):
+    bpy, coll = labeled
+    lab = state(coll).labeling
+    objs = labeled_objects(coll)
+    a, b = lab.names.index("RingTip"), lab.names.index("PinkyTip")
+    frame = _long_segment_frame(lab, a)
+    slot_a, seg_a = _slot_and_segment(lab, a, frame)
+    slot_b, seg_b = _slot_and_segment(lab, b, frame)
+    bpy.context.scene.frame_set(frame + 1)
+    _select(bpy, objs[a], objs[b])
+    assert bpy.ops.mocap_autolabel.swap_labels() == {"FINISHED"}
+    st = state(coll)
+    assert set(st.review.constraints) == {Constraint(slot_a, frame, int(lab.stop[seg_a]), b),
+                                          Constraint(slot_b, frame, int(lab.stop[seg_b]), a)}
+    per = st.labeling.per_sample()
+    assert per[frame, slot_a] == b and per[frame, slot_b] == a
+    assert (per[:frame] == lab.per_sample()[:frame]).all()  # nothing before the frame moved
+    assert_scene_shows(coll, st.labeling)
+
+    # Unlabel the (now) b marker: its samples to the end of the segment become ghosts.
+    objs = labeled_objects(coll)
+    _select(bpy, objs[b])
+    assert bpy.ops.mocap_autolabel.unlabel() == {"FINISHED"}
+    st = state(coll)
+    assert st.review.constraints[-1] == Constraint(slot_a, frame, int(lab.stop[seg_a]), NULL)
+    per = st.labeling.per_sample()
+    live = per[frame:int(lab.stop[seg_a]), slot_a]
+    assert (live[live != EMPTY] == NULL).all()
+    assert any(int(o["mocap_null"]) == slot_a for o in coll["mocap_unlabeled"].objects)
+    assert_scene_shows(coll, st.labeling)
+
+    # Lock a whole segment: its class becomes LOCKED (JITTER keys), labels unchanged.
+    c = lab.names.index("ThumbTip")
+    f2 = _long_segment_frame(st.labeling, c)
+    lab_c = st.labeling
+    slot_c, seg_c = _slot_and_segment(lab_c, c, f2)
+    bpy.context.scene.frame_set(f2 + 1)
+    _select(bpy, labeled_objects(coll)[c])
+    labels_before = st.labeling.per_sample()
+    assert bpy.ops.mocap_autolabel.lock() == {"FINISHED"}
+    st = state(coll)
+    seg_start, seg_stop = int(lab_c.start[seg_c]), int(lab_c.stop[seg_c])
+    assert st.review.constraints[-1] == Constraint(slot_c, seg_start, seg_stop, c)
+    np.testing.assert_array_equal(st.labeling.per_sample(), labels_before)
+    frames, types = key_types(labeled_objects(coll)[c])
+    from mocap_autolabel.blender import animio
+
+    inside = (frames >= seg_start + 1) & (frames < seg_stop + 1)
+    assert inside.any() and (types[inside] == animio.key_type_value(KEY_TYPES[LOCKED])).all()
+
+    # Split: one more segment, same labels, recorded on the review.
+    n = len(st.labeling)
+    assert bpy.ops.mocap_autolabel.split() == {"FINISHED"}
+    st2 = state(coll)
+    assert st2.review.splits == [(slot_c, f2)] and len(st2.labeling) == n + 1
+    np.testing.assert_array_equal(st2.labeling.per_sample(), labels_before)
+
+
+def test_resolve_keeps_every_constraint_and_rewrites_only_changes(labeled):
+    bpy, coll = labeled
+    lab = state(coll).labeling
+    a, b = lab.names.index("IndexTip"), lab.names.index("IndexPIP")
+    frame = _long_segment_frame(lab, a)
+    bpy.context.scene.frame_set(frame + 1)
+    objs = labeled_objects(coll)
+    _select(bpy, objs[a], objs[b])
+    bpy.ops.mocap_autolabel.swap_labels()
+    _select(bpy, labeled_objects(coll)[lab.names.index("ThumbTip")])
+    bpy.ops.mocap_autolabel.unlabel()
+    constraints = state(coll).review.constraints
+    assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
+    st = state(coll)
+    assert st.review.constraints == constraints
+    per = st.labeling.per_sample()
+    for c in constraints:
+        got = per[c.start:c.stop, c.slot]
+        assert (got[got != EMPTY] == c.label).all(), c
+    assert_scene_shows(coll, st.labeling)
+    # A second re-solve changes nothing, so it rewrites nothing.
+    from mocap_autolabel.blender.review import finish_label, prepare_label
+
+    request = prepare_label(coll)
+    counts = finish_label(bpy.context.scene, coll, request, request.run())
+    assert counts == {"labeled": 0, "unlabeled": 0}
+
+
+def test_save_reopen_keeps_the_review(labeled, tmp_path):
+    bpy, coll = labeled
+    lab = state(coll).labeling
+    a = lab.names.index("MiddleTip")
+    bpy.context.scene.frame_set(_long_segment_frame(lab, a) + 1)
+    _select(bpy, labeled_objects(coll)[a])
+    bpy.ops.mocap_autolabel.unlabel()
+    before = state(coll)
+    path = tmp_path / "review.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    coll = bpy.context.scene.mocap_autolabel.take
+    after = state(coll)
+    assert after.review.constraints == before.review.constraints
+    for key in ("slot", "start", "stop", "label", "locked"):
+        np.testing.assert_array_equal(getattr(after.labeling, key), getattr(before.labeling, key))
+    np.testing.assert_allclose(after.labeling.confidence, before.labeling.confidence, atol=1e-6)
+    assert len(bpy.context.scene.mocap_autolabel.uncertain) == len(uncertain_segments(after.labeling))
+    # The review goes on without the source file: the take is read back from the scene.
+    import os
+
+    os.remove(coll["mocap_source"])
+    assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
+    per = state(coll).labeling.per_sample()
+    c = before.review.constraints[0]
+    got = per[c.start:c.stop, c.slot]
+    assert (got[got != EMPTY] == NULL).all()
+
+
+def test_next_previous_and_jump(labeled):
+    bpy, coll = labeled
+    lab = state(coll).labeling
+    scene = bpy.context.scene
+    unsure = uncertain_segments(lab)
+    starts = np.sort(lab.start[unsure])
+    scene.frame_set(1)
+    assert bpy.ops.mocap_autolabel.next_uncertain() == {"FINISHED"}
+    first = starts[starts > 0][0]
+    assert scene.frame_current == first + 1
+    seg = unsure[lab.start[unsure] == first]
+    assert int(bpy.context.active_object["mocap_label"]) in lab.label[seg]
+    scene.frame_set(int(starts[-1]) + 5)
+    assert bpy.ops.mocap_autolabel.next_uncertain(previous=True) == {"FINISHED"}
+    assert scene.frame_current == starts[-1] + 1
+    settings = scene.mocap_autolabel
+    settings.uncertain_index = 0  # a click in the list jumps
+    item = settings.uncertain[0]
+    assert scene.frame_current == item.frame_start
+    assert int(bpy.context.active_object["mocap_label"]) == lab.names.index(item.label)
+
+
+def test_errors_are_clear(labeled):
+    bpy, coll = labeled
+    lab = state(coll).labeling
+    a = lab.names.index("IndexTip")
+    missing = np.flatnonzero((lab.per_sample() == a).sum(axis=1) == 0)
+    if not len(missing):
+        pytest.skip("the label never goes missing in this take")
+    _select(bpy, labeled_objects(coll)[a])
+    bpy.context.scene.frame_set(int(missing[0]) + 1)
+    with pytest.raises(RuntimeError, match="no sample at frame"):
+        bpy.ops.mocap_autolabel.unlabel()
+    _select(bpy, labeled_objects(coll)[a])
+    with pytest.raises(RuntimeError, match="exactly two"):
+        bpy.ops.mocap_autolabel.swap_labels()
+
+
+def test_label_needs_a_take(empty_scene, bpy_module):
+    with pytest.raises(RuntimeError, match="Import a take first"):
+        bpy_module.ops.mocap_autolabel.label()
+    with pytest.raises(RuntimeError, match="Label a take first"):
+        bpy_module.ops.mocap_autolabel.resolve()
+
+
+def test_export_labeled_c3d_and_overlay(labeled, tmp_path):
+    bpy, coll = labeled
+    from mocap_autolabel.blender.review import current_take, overlay_geometry
+    from mocap_autolabel.core.take import read_take
+
+    lab = state(coll).labeling
+    out = tmp_path / "labeled.c3d"
+    assert bpy.ops.mocap_autolabel.export_labeled(filepath=str(out)) == {"FINISHED"}
+    back = read_take(out)
+    assert back.names[:19] == lab.names and back.n_frames == lab.n_frames
+    assert back.valid.sum() == current_take(coll).valid.sum()  # every sample once
+    per = lab.per_sample()
+    np.testing.assert_array_equal(back.valid[:, :19].sum(axis=0),
+                                  [(per == m).sum() for m in range(19)])
+    # The overlay shows each present label once, in its finger's colour, and rings the uncertain ones.
+    frame = 300
+    bpy.context.scene.frame_set(frame + 1)
+    classes = marker_classes(lab)
+    geo = overlay_geometry(coll, load_layout("han19"), classes, frame)
+    assert len(geo["points"]) == (classes[frame] >= 0).sum()
+    assert len(geo["uncertain"]) == np.isin(classes[frame], (1, 2)).sum()
+    assert geo["colors"].shape == (len(geo["points"]), 4) and len(geo["lines"]) % 2 == 0
