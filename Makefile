@@ -14,16 +14,17 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
-## demo: the bundled raw synthetic take -> labels (set + trajectory voting, C3D + report) -> a calibrated,
-## solved hand rig (.blend, FBX, BVH, report); also the raw take alone and beside the hand that made it
+## demo: the bundled raw synthetic take -> labels (set + trajectory voting, C3D + report) and a review scene
+## (labeled markers keyed by confidence + the solved hand) -> a calibrated, solved hand rig (.blend, FBX, BVH,
+## report); also the raw take alone and beside the hand that made it
 demo: venv
 	$(BIN)/python -m mocap_autolabel info samples/demo_take.c3d
-	$(BIN)/python -m mocap_autolabel label samples/demo_take.c3d --layout han19 -o out/demo_labeled.c3d --report out/demo_report.json
+	$(BIN)/python -m mocap_autolabel label samples/demo_take.c3d --layout han19 -o out/demo_labeled.c3d --report out/demo_report.json --blend out/demo_review.blend --solve-hand
 	$(BIN)/python -m mocap_autolabel info out/demo_labeled.c3d
 	$(BIN)/python -m mocap_autolabel solve out/demo_labeled.c3d --layout han19 --blend out/demo_hand.blend --fbx out/demo_hand.fbx --bvh out/demo_hand.bvh --report out/demo_hand.json --save-calibration out/demo_calibration.json
 	$(BIN)/python -m mocap_autolabel import samples/demo_take.c3d --blend out/demo.blend --summary out/demo_summary.json
 	$(BIN)/python -m mocap_autolabel synth --layout han19 --frames 1200 --seed 1 -o out/demo_take.c3d --blend out/demo_truth.blend
-	@echo "demo: open out/demo_hand.blend (labeled markers + solved hand), out/demo.blend (the raw take) and out/demo_truth.blend (raw take + the true hand)"
+	@echo "demo: open out/demo_review.blend in Blender with the add-on (Mocap tab > Review: labels coloured by confidence + the solved hand), out/demo_hand.blend (solved rig), out/demo.blend (the raw take) and out/demo_truth.blend (raw take + the true hand)"
 
 ## test: ruff, then every test (real-data tests skip when ../shared/data is absent)
 test: venv lint
@@ -43,6 +44,7 @@ bench: venv
 	$(BIN)/python benchmarks/hand_solve.py
 	$(BIN)/python benchmarks/validation.py
 	$(BIN)/python benchmarks/batch.py
+	$(BIN)/python benchmarks/review.py
 
 ## models: retrain every shipped model (set, perm, cnn for han19 and glove13), seeded, then recalibrate
 ## the segment confidences; about 1.5 hours on 2 cores

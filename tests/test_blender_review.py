@@ -332,3 +332,31 @@ def test_export_labeled_c3d_and_overlay(labeled, tmp_path):
     assert len(geo["points"]) == (classes[frame] >= 0).sum()
     assert len(geo["uncertain"]) == np.isin(classes[frame], (1, 2)).sum()
     assert geo["colors"].shape == (len(geo["points"]), 4) and len(geo["lines"]) % 2 == 0
+
+
+def test_cli_label_writes_a_review_scene_the_panel_adopts(empty_scene, bpy_module, take_file, tmp_path):
+    from mocap_autolabel.cli import main
+
+    bpy = bpy_module
+    out = tmp_path / "review.blend"
+    assert main(["label", str(take_file), "--layout", "han19", "--blend", str(out), "--solve-hand"]) == 0
+    import addon_utils
+
+    addon_utils.enable("mocap_autolabel", default_set=True)  # the CLI's factory reset disabled it
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    settings = bpy.context.scene.mocap_autolabel
+    coll = settings.take
+    assert coll is not None and coll["mocap_source"] == str(take_file)
+    lab = state(coll).labeling
+    assert len(settings.uncertain) == len(uncertain_segments(lab))
+    assert_scene_shows(coll, lab)
+    assert any(o.type == "ARMATURE" for o in bpy.data.collections["Hand"].all_objects)
+    assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
+
+
+def test_cli_label_blend_needs_a_blend_path(tmp_path, take_file):
+    from mocap_autolabel.cli import main
+
+    assert main(["label", str(take_file), "--blend", str(tmp_path / "x.c3d")]) == 2
+    assert main(["label", str(take_file), "--solve-hand"]) == 2
+    assert not list(tmp_path.iterdir())

@@ -37,7 +37,7 @@ def _add_shortcuts() -> None:
 def register() -> None:
     import bpy
 
-    from .blender import properties, session
+    from .blender import properties
     from .ui import overlay
     from .ui.menus import menu_import
 
@@ -45,7 +45,6 @@ def register() -> None:
         bpy.utils.register_class(cls)
     properties.register()
     bpy.types.TOPBAR_MT_file_import.append(menu_import)
-    bpy.app.handlers.load_post.append(session.forget_all)
     overlay.register()
     _add_shortcuts()
 
@@ -53,7 +52,7 @@ def register() -> None:
 def unregister() -> None:
     import bpy
 
-    from .blender import properties, session
+    from .blender import properties
     from .ui import overlay
     from .ui.menus import menu_import
 
@@ -61,9 +60,6 @@ def unregister() -> None:
         keymap.keymap_items.remove(item)
     _keymap_items.clear()
     overlay.unregister()
-    if session.forget_all in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(session.forget_all)
-    session.forget_all()
     bpy.types.TOPBAR_MT_file_import.remove(menu_import)
     properties.unregister()
     for cls in reversed(_classes()):

@@ -82,6 +82,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the performer's hand calibration for --validate (default: calibrated on this take)")
     lab.add_argument("--report", metavar="REPORT.json", help="write counts, confidence, uncertain segments, timings")
     lab.add_argument("--labels", metavar="OUT.npz", help="write labels and confidences per frame and point slot")
+    lab.add_argument("--blend", metavar="OUT.blend",
+                     help="write a review scene: the raw take, labeled and unlabeled markers keyed by confidence "
+                          "(open it in Blender with the add-on: Mocap tab > Review); needs Blender or bpy")
+    lab.add_argument("--solve-hand", action="store_true",
+                     help="also fit the hand to the labels and put the keyed rig in --blend")
 
     sol = sub.add_parser("solve", help="fit the rigged hand to a labeled take: calibration, IK, Blender/FBX/BVH")
     sol.add_argument("file", metavar="FILE", help="a labeled take (C3D, TRC or TSV) with the layout's marker names")
@@ -268,6 +273,12 @@ def _label(args) -> int:
         print("mocap_autolabel label: error: gmm needs --fit LABELED: a labeled take of the subject to fit on",
               file=sys.stderr)
         return EXIT_USAGE
+    if args.blend and not args.blend.lower().endswith(".blend") or args.solve_hand and not args.blend:
+        print("mocap_autolabel label: error: --blend must name a .blend file, and --solve-hand needs --blend",
+              file=sys.stderr)
+        return EXIT_USAGE
+    if args.blend and _bpy_or_none("label --blend") is None:
+        return EXIT_USAGE
     try:
         layout = load_layout(args.layout)
         take = read_take(args.file)
@@ -287,6 +298,15 @@ def _label(args) -> int:
             from .core.formats.c3d import write_c3d
 
             write_c3d(labeled_take(take, labeling), args.output)
+        solved = None
+        if args.solve_hand:
+            from .core.pipeline import solve_take
+
+            solved = solve_take(labeled_take(take, labeling), layout)
+        if args.blend:
+            from .blender.export import write_review_scene
+
+            write_review_scene(take, args.layout, labeling, args.blend, args.method, args.temporal, solved)
     except Exception as exc:
         return _fail(args.file, exc)
     summary = labeling.summary()
@@ -308,6 +328,9 @@ def _label(args) -> int:
               f"{score.false_occlusion} false occlusion)")
     if args.output:
         print(f"  labeled  {args.output}")
+    if args.blend:
+        hand = f" and the solved hand (marker RMS {solved.fit.overall_rms() * 1000:.2f} mm)" if solved else ""
+        print(f"  review   {args.blend}: labeled markers coloured by confidence{hand}")
     if args.report:
         with atomic_output(args.report) as tmp, open(tmp, "w", encoding="utf-8") as fh:
             json.dump(report, fh, indent=1)

@@ -79,3 +79,26 @@ def write_solved_scene(take, solved, blend: str | None = None, fbx: str | None =
         export_bvh(arm, bvh, first, last)
         out["bvh"] = bvh
     return out
+
+
+def write_review_scene(take, layout_ref: str, labeling, blend: str, method: str = "set", temporal: str = "vote",
+                       solved=None) -> str:
+    """A fresh scene for review: the raw take, its labeled and unlabeled markers keyed by confidence,
+    the review state (so the add-on's panel picks it up), and the solved hand if given; saved to ``blend``."""
+    from ..core.layout import load_layout
+    from ..core.review import Review
+    from .armature import build_solved_hand
+    from .review import ReviewState, commit, write_labeling
+    from .scene import ImportOptions, build_take
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    coll = build_take(take, scene, ImportOptions())
+    write_labeling(coll, take, load_layout(layout_ref), labeling)
+    commit(scene, coll, ReviewState(labeling, Review(), layout_ref, method, temporal))
+    if solved is not None:
+        hand = bpy.data.collections.new("Hand")
+        scene.collection.children.link(hand)
+        build_solved_hand(solved, hand)
+    save_blend(blend)
+    return blend

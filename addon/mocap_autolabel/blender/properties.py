@@ -50,7 +50,7 @@ def _take_changed(self, context):
     from . import review
 
     if self.take is not None and review.has_review(self.take):
-        refresh_uncertain(context.scene, self.take, review.load_state(self.take).labeling)
+        refresh_uncertain(self.id_data, self.take, review.load_state(self.take).labeling)
     else:
         self.uncertain.clear()
 
@@ -109,12 +109,36 @@ def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, l
     settings["uncertain_index"] = -1
 
 
+@bpy.app.handlers.persistent
+def on_load(*_args) -> None:
+    """After a file loads: drop the session caches, and give every scene without a reviewed take the
+    first labeled take it holds (a .blend written by the command line has none set)."""
+    from .review import has_review
+    from .session import forget_all
+
+    forget_all()
+    for scene in bpy.data.scenes:
+        settings = getattr(scene, "mocap_autolabel", None)
+        if settings is None or settings.take is not None:
+            continue
+        for coll in scene.collection.children_recursive:
+            if has_review(coll):
+                settings.take = coll  # its update fills the uncertain list
+                break
+
+
 classes = (MOCAPAL_PG_uncertain, MOCAPAL_PG_settings)
 
 
 def register() -> None:
     bpy.types.Scene.mocap_autolabel = PointerProperty(type=MOCAPAL_PG_settings)
+    bpy.app.handlers.load_post.append(on_load)
 
 
 def unregister() -> None:
+    from .session import forget_all
+
+    if on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(on_load)
+    forget_all()
     del bpy.types.Scene.mocap_autolabel

@@ -456,7 +456,9 @@ def commit(scene: bpy.types.Scene, take_coll: bpy.types.Collection, state: Revie
     from .properties import refresh_uncertain
 
     store_state(take_coll, state)
-    settings = scene.mocap_autolabel
+    settings = getattr(scene, "mocap_autolabel", None)
+    if settings is None:  # the add-on is not registered (a CLI run): the panel adopts the take on load
+        return
     if settings.take != take_coll:
         settings.take = take_coll  # its update rebuilds the list
     refresh_uncertain(scene, take_coll, state.labeling)

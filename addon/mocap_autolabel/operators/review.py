@@ -306,7 +306,11 @@ class MOCAPAL_OT_split(_ReviewOperator, bpy.types.Operator):
 
         slot = self._targets(context, coll, state)[0]
         index = sample_index(coll, context.scene.frame_current)
-        state.review.split(state.labeling, slot, index)
+        lab = state.labeling
+        if ((lab.slot == slot) & (lab.start == index)).any():
+            raise ValueError(f"{context.active_object.name}: a new segment already starts at frame "
+                             f"{context.scene.frame_current}; nothing to split")
+        state.review.split(lab, slot, index)
         edit(context.scene, coll, state, apply_split(state.labeling, slot, index))
         return f"split slot {slot} at frame {context.scene.frame_current}"
 
