@@ -360,3 +360,23 @@ def test_cli_label_blend_needs_a_blend_path(tmp_path, take_file):
     assert main(["label", str(take_file), "--blend", str(tmp_path / "x.c3d")]) == 2
     assert main(["label", str(take_file), "--solve-hand"]) == 2
     assert not list(tmp_path.iterdir())
+
+
+def test_review_ui_registers_and_unregisters_cleanly(bpy_module):
+    import addon_utils
+
+    bpy = bpy_module
+    names = ("MOCAPAL_PT_review", "MOCAPAL_PT_relabel", "MOCAPAL_PT_legend", "MOCAPAL_UL_uncertain",
+             "MOCAPAL_MT_mocap")
+    assert all(hasattr(bpy.types, n) for n in names)
+    assert hasattr(bpy.types.Scene, "mocap_autolabel")
+    draw_funcs = [f.__name__ for f in bpy.types.VIEW3D_MT_object._dyn_ui_initialize()]
+    assert "menu_mocap" in draw_funcs
+    addon_utils.disable("mocap_autolabel", default_set=True)
+    try:
+        assert not any(hasattr(bpy.types, n) for n in names)
+        assert not hasattr(bpy.types.Scene, "mocap_autolabel")
+        assert not any(getattr(h, "__name__", "") == "on_load" for h in bpy.app.handlers.load_post)
+    finally:
+        addon_utils.enable("mocap_autolabel", default_set=True)
+    assert all(hasattr(bpy.types, n) for n in names)

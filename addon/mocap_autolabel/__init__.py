@@ -39,12 +39,14 @@ def register() -> None:
 
     from .blender import properties
     from .ui import overlay
-    from .ui.menus import menu_import
+    from .ui.menus import MENU_PARENTS, menu_import, menu_mocap
 
     for cls in _classes():
         bpy.utils.register_class(cls)
     properties.register()
     bpy.types.TOPBAR_MT_file_import.append(menu_import)
+    for parent in MENU_PARENTS:
+        getattr(bpy.types, parent).append(menu_mocap)
     overlay.register()
     _add_shortcuts()
 
@@ -54,12 +56,14 @@ def unregister() -> None:
 
     from .blender import properties
     from .ui import overlay
-    from .ui.menus import menu_import
+    from .ui.menus import MENU_PARENTS, menu_import, menu_mocap
 
     for keymap, item in _keymap_items:
         keymap.keymap_items.remove(item)
     _keymap_items.clear()
     overlay.unregister()
+    for parent in MENU_PARENTS:
+        getattr(bpy.types, parent).remove(menu_mocap)
     bpy.types.TOPBAR_MT_file_import.remove(menu_import)
     properties.unregister()
     for cls in reversed(_classes()):
