@@ -380,3 +380,20 @@ def test_review_ui_registers_and_unregisters_cleanly(bpy_module):
     finally:
         addon_utils.enable("mocap_autolabel", default_set=True)
     assert all(hasattr(bpy.types, n) for n in names)
+
+
+def test_a_labeling_that_finishes_after_an_edit_is_refused(labeled):
+    from mocap_autolabel.blender.review import finish_label, prepare_label
+
+    bpy, coll = labeled
+    request = prepare_label(coll)  # what the modal Label operator hands its worker thread
+    result = request.run()
+    lab = state(coll).labeling
+    a = lab.names.index("IndexTip")
+    bpy.context.scene.frame_set(_long_segment_frame(lab, a) + 1)
+    _select(bpy, labeled_objects(coll)[a])
+    bpy.ops.mocap_autolabel.unlabel()  # the reviewer edits while the job runs
+    edited = state(coll)
+    with pytest.raises(ValueError, match="changed while the labeling ran"):
+        finish_label(bpy.context.scene, coll, request, result)
+    assert state(coll).review.constraints == edited.review.constraints

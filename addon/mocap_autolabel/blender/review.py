@@ -405,6 +405,7 @@ class LabelRequest:
     review: Review
     previous: Labeling | None
     labeler: object
+    token: str = ""  # the stored state's token when the request was made
 
     def run(self, say=None) -> Labeling:
         from ..core.pipeline import label_take
@@ -436,12 +437,20 @@ def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None
     lab = None
     if method in ("set", "perm", "cnn"):
         lab = labeler(take_coll, method, layout, lambda: make_labeler(method, layout))
-    return LabelRequest(take_coll.name, take, layout, layout_ref, method, temporal, review, previous, lab)
+    return LabelRequest(take_coll.name, take, layout, layout_ref, method, temporal, review, previous, lab,
+                        state.token if state else "")
 
 
 def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, request: LabelRequest,
                  labeling: Labeling) -> dict:
-    """Show a finished labeling and store it with the request's corrections."""
+    """Show a finished labeling and store it with the request's corrections.
+
+    Raises:
+        ValueError: the take's review changed while the labeling ran (its result would undo that change).
+    """
+    now = str(take_coll["mocap_settings"].get("token", "")) if has_review(take_coll) else ""
+    if now != request.token:
+        raise ValueError(f"{take_coll.name}: the labels changed while the labeling ran; label again")
 
     if request.previous is None and has_review(take_coll):
         _clear_labels(take_coll)  # labeled before with another layout

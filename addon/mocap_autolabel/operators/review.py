@@ -141,7 +141,11 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         if coll is None:
             self.report({"ERROR"}, f"the take {request.take_name!r} was removed while it was being labeled")
             return {"CANCELLED"}
-        finish_label(context.scene, coll, request, labeling)
+        try:
+            finish_label(context.scene, coll, request, labeling)
+        except ValueError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
         s = summary(labeling, context.scene.mocap_autolabel.sure)
         self.report({"INFO"}, f"Labeled {request.take_name}: {s['labels']} labels, {s['confident']:.1f} % of "
                               f"labeled samples confident, {s['uncertain']} uncertain segments")
