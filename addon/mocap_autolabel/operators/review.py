@@ -78,6 +78,14 @@ class _ReviewOperator:
             raise ValueError(f"the selected marker has no sample at frame {context.scene.frame_current}")
         return list(dict.fromkeys(slots))
 
+    def _each_selected(self, context, coll, state, correct, what: str) -> str:
+        """Make one correction ``correct(labeling, slot, index)`` per selected marker at the current frame."""
+        from ..blender.review import sample_index
+
+        index = sample_index(coll, context.scene.frame_current)
+        made = [correct(state.labeling, s, index) for s in self._targets(context, coll, state, True)]
+        return f"{len(made)} {what}: " + self._edit(context, coll, state, made)
+
     def _edit(self, context, coll, state, constraints) -> str:
         from ..blender.review import edit
         from ..core.review import apply_constraints
@@ -277,11 +285,7 @@ class MOCAPAL_OT_unlabel(_ReviewOperator, bpy.types.Operator):
     bl_label = "Unlabel"
 
     def apply(self, context, coll, state) -> str:
-        from ..blender.review import sample_index
-
-        index = sample_index(coll, context.scene.frame_current)
-        made = [state.review.unlabel(state.labeling, s, index) for s in self._targets(context, coll, state, True)]
-        return f"unlabeled {len(made)} trajectories: " + self._edit(context, coll, state, made)
+        return self._each_selected(context, coll, state, state.review.unlabel, "trajectories unlabeled")
 
 
 class MOCAPAL_OT_lock(_ReviewOperator, bpy.types.Operator):
@@ -291,11 +295,7 @@ class MOCAPAL_OT_lock(_ReviewOperator, bpy.types.Operator):
     bl_label = "Lock"
 
     def apply(self, context, coll, state) -> str:
-        from ..blender.review import sample_index
-
-        index = sample_index(coll, context.scene.frame_current)
-        made = [state.review.lock(state.labeling, s, index) for s in self._targets(context, coll, state, True)]
-        return f"locked {len(made)} segments: " + self._edit(context, coll, state, made)
+        return self._each_selected(context, coll, state, state.review.lock, "segments locked")
 
 
 class MOCAPAL_OT_split(_ReviewOperator, bpy.types.Operator):
