@@ -186,3 +186,19 @@ def test_rotation_helpers_round_trip():
     smooth = continuous_quaternions(flipped)
     assert np.all(np.sum(smooth[1:] * smooth[:-1], axis=1) > 0.99)
     assert np.allclose(np.abs(smooth), np.abs(turn))
+
+
+def test_widened_pose_ranges_go_past_the_limits_and_no_further():
+    from mocap_autolabel.core.hand.skeleton import JOINT_LIMITS_DEG
+    from mocap_autolabel.core.synth.poses import widened_limits
+
+    rng = np.random.default_rng(5)
+    plain = np.degrees(sample_joint_angles(rng, 4000))
+    wide = np.degrees(sample_joint_angles(rng, 4000, margin_deg=15.0))
+    lo, hi = JOINT_LIMITS_DEG[:, 0], JOINT_LIMITS_DEG[:, 1]
+    assert (plain >= lo - 1e-9).all() and (plain <= hi + 1e-9).all()
+    assert (wide >= lo - 15 - 1e-9).all() and (wide <= hi + 15 + 1e-9).all()
+    beyond = (wide < lo - 1) | (wide > hi + 1)
+    assert beyond.any(axis=0).all()  # every joint is sampled past its textbook range sometimes
+    wlo, whi = widened_limits(15.0)
+    np.testing.assert_allclose(np.degrees(whi - wlo), hi - lo + 30)

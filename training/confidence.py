@@ -69,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=CALIBRATIONS)
     args = ap.parse_args(argv)
     table = {}
+    if args.only and os.path.isfile(args.out):  # recalibrate some pairs, keep the others
+        with open(args.out, encoding="utf-8") as fh:
+            table = json.load(fh)
     for name in shipped_layouts():
         layout = load_layout(name)
         data = validation_takes(layout, args.takes, args.frames)

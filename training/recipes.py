@@ -24,7 +24,7 @@ def recipe(method: str, layout: str) -> Recipe:
         # Ours: every corruption, distractors in half of the frames; per hand, bone proportions
         # varied by up to 10 % and flexed fingers that converge by a random amount (real hands and
         # gloves differ from the average hand in both; the han2018 glove's do).
-        frames = asdict(FrameConfig(convergence=0.1, proportions=0.1))
+        frames = asdict(FrameConfig(convergence=0.1, proportions=0.1, range_margin_deg=15.0))
         return Recipe(method="set", steps=10000 if layout == "han19" else 6000, lr=6e-3, frames=frames)
     if method == "perm":
         return Recipe(method="perm", steps=3000, lr=3e-3, frames=HAN_PROTOCOL)

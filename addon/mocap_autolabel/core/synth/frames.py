@@ -11,12 +11,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..hand.skeleton import BONE_NAMES, DOF_INDEX, FINGERS, N_DOF, POSE_LIMITS, HandModel, sample_hand_size
+from ..hand.skeleton import BONE_NAMES, DOF_INDEX, FINGERS, N_DOF, HandModel, sample_hand_size
 from ..hand.skin import blend
 from ..layout import Layout
 from ..rotations import random_rotations
 from .generate import EMPTY, GHOST, _slip
-from .poses import sample_joint_angles
+from .poses import sample_joint_angles, widened_limits
 
 
 @dataclass
@@ -36,6 +36,7 @@ class FrameConfig:
     # rest planes, and by how much differs between hands and gloves.
     convergence: float = 0.0
     proportions: float = 0.0  # per hand, every bone's length times 1 +- up to this (other gloves, other hands)
+    range_margin_deg: float = 0.0  # every joint range widened by this much on both sides
     hands: int = 64  # distinct hands (size, side, placement) per call
 
     @property
@@ -78,13 +79,14 @@ def hand_frames(layout: Layout, n: int, rng: np.random.Generator, cfg: FrameConf
         binding, normals = layout.place(hand)
         binding = _slip(rng, binding, normals, cfg.slip)
         pose = np.zeros((len(rows), N_DOF))
-        pose[:, 6:] = sample_joint_angles(rng, len(rows))
+        pose[:, 6:] = sample_joint_angles(rng, len(rows), margin_deg=cfg.range_margin_deg)
+        lo, hi = widened_limits(cfg.range_margin_deg)
         if cfg.convergence > 0:
             c = rng.uniform(-cfg.convergence, cfg.convergence, size=len(FINGERS))
             for i, f in enumerate(FINGERS):
                 flex = pose[:, DOF_INDEX[f"{f}_mcp_flex"]] + pose[:, DOF_INDEX[f"{f}_pip"]]
                 a = DOF_INDEX[f"{f}_mcp_abd"]
-                pose[:, a] = np.clip(pose[:, a] + c[i] * flex, POSE_LIMITS[0, a], POSE_LIMITS[1, a])
+                pose[:, a] = np.clip(pose[:, a] + c[i] * flex, lo[a - 6], hi[a - 6])
         r, t = hand.skinning_transforms(pose)
         out[rows] = blend(r, t, binding)
     return out

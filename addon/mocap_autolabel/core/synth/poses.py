@@ -63,37 +63,46 @@ _PIP = np.array([JOINT_NAMES.index(f"{f}_pip") for f in FINGERS])
 _DIP = np.array([JOINT_NAMES.index(f"{f}_dip") for f in FINGERS])
 
 
-def couple_dip(angles: np.ndarray, rng: np.random.Generator | None = None, noise_deg: float = 8.0) -> np.ndarray:
+def couple_dip(angles: np.ndarray, rng: np.random.Generator | None = None, noise_deg: float = 8.0,
+               limits: tuple[np.ndarray, np.ndarray] = (_LO, _HI)) -> np.ndarray:
     """Set every DIP to 2/3 of its PIP (plus Gaussian noise if ``rng``), as tendons do. ``(..., 20)``."""
     out = np.array(angles, dtype=float, copy=True)
     dip = out[..., _PIP] * 2.0 / 3.0
     if rng is not None:
         dip = dip + np.radians(noise_deg) * rng.standard_normal(dip.shape)
     out[..., _DIP] = dip
-    return np.clip(out, _LO, _HI)
+    return np.clip(out, *limits)
+
+
+def widened_limits(margin_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Joint limits ``(20,)`` low and high (radians), each range widened by ``margin_deg`` on both sides."""
+    m = np.radians(margin_deg)
+    return _LO - m, _HI + m
 
 
 def sample_joint_angles(rng: np.random.Generator, n: int, canonical: float = 0.4, synergy: float = 0.3,
-                        jitter_deg: float = 8.0) -> np.ndarray:
+                        jitter_deg: float = 8.0, margin_deg: float = 0.0) -> np.ndarray:
     """``n`` joint-angle vectors ``(n, 20)`` (radians) within the limits.
 
     A mix of: a canonical pose plus Gaussian jitter (share ``canonical``); a "synergy" pose in
     which all fingers share one flexion level, as real hands mostly move (share ``synergy``);
-    and uniform samples over the limits with DIP coupled to PIP (the rest).
+    and uniform samples over the limits with DIP coupled to PIP (the rest). ``margin_deg`` widens
+    every range (training data for hands and gloves that go past the textbook limits).
     """
+    lo, hi = widened_limits(margin_deg)
     names = list(CANONICAL_POSES)
     kind = rng.random(n)
     out = np.empty((n, len(JOINT_NAMES)))
-    uniform = rng.uniform(_LO, _HI, size=(n, len(JOINT_NAMES)))
-    uniform = couple_dip(uniform, rng)
+    uniform = rng.uniform(lo, hi, size=(n, len(JOINT_NAMES)))
+    uniform = couple_dip(uniform, rng, limits=(lo, hi))
     picks = np.array([CANONICAL_POSES[names[i]] for i in rng.integers(len(names), size=n)])
     jitter = np.radians(jitter_deg) * rng.standard_normal((n, len(JOINT_NAMES)))
     level = rng.uniform(0, 1, size=(n, 1))
-    syn = _LO + (_HI - _LO) * np.clip(level + 0.12 * rng.standard_normal((n, len(JOINT_NAMES))), 0, 1)
-    syn = couple_dip(syn, rng)
+    syn = lo + (hi - lo) * np.clip(level + 0.12 * rng.standard_normal((n, len(JOINT_NAMES))), 0, 1)
+    syn = couple_dip(syn, rng, limits=(lo, hi))
     abd = [JOINT_NAMES.index(f"{f}_mcp_abd") for f in FINGERS]
-    syn[:, abd] = rng.uniform(_LO[abd], _HI[abd], size=(n, len(abd))) * (1 - level)  # a fist is not spread
+    syn[:, abd] = rng.uniform(lo[abd], hi[abd], size=(n, len(abd))) * (1 - level)  # a fist is not spread
     out[:] = uniform
     out[kind < canonical + synergy] = syn[kind < canonical + synergy]
     out[kind < canonical] = picks[kind < canonical] + jitter[kind < canonical]
-    return np.clip(out, _LO, _HI)
+    return np.clip(out, lo, hi)
