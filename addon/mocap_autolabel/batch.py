@@ -21,12 +21,15 @@ import os
 import sys
 import time
 import tomllib
+import warnings
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 
 TAKE_EXTENSIONS = (".c3d", ".trc", ".tsv")
-#: A hand is "found" when at least this share of frames has at least half the layout labeled.
-HAND_FRAMES = 0.3
+#: A hand is "found" when at least this share of frames has at least half the layout labeled, all
+#: within HAND_REACH (metres) of their median: a hand is about 0.2 m long, a body capture labeled
+#: as a hand spreads its "labels" over half a metre or more.
+HAND_FRAMES, HAND_REACH = 0.3, 0.25
 
 
 @dataclass
@@ -141,6 +144,20 @@ def _finished(out_dir: str, name: str, settings: BatchSettings) -> dict | None:
     return report
 
 
+def _hand_frames(markers) -> float:
+    """Share of frames whose labeled markers ``(F, M, 3)`` look like one hand (see :data:`HAND_FRAMES`)."""
+    import numpy as np
+
+    if not len(markers):
+        return 0.0
+    count = np.isfinite(markers[..., 0]).sum(axis=1)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # frames with no labeled marker
+        centre = np.nanmedian(markers, axis=1, keepdims=True)
+        reach = np.nanmax(np.linalg.norm(markers - centre, axis=2), axis=1)
+    return float(((count >= markers.shape[1] / 2) & (reach <= HAND_REACH)).mean())
+
+
 def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
     """Label one take (and solve its hand) and write its outputs; never raises for a bad take.
 
@@ -168,7 +185,6 @@ def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) ->
 
 
 def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: dict) -> dict:
-    import numpy as np
 
     from .core.errors import MocapInputError
     from .core.formats.c3d import write_c3d
@@ -192,11 +208,11 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
                           validate=settings.validate, hand=hand_cal)
     timings["label"] = round(time.perf_counter() - t, 4)
     labeled = labeled_take(take, labeling)
-    per_frame = np.isfinite(labeled.positions[:, :len(layout), 0]).sum(axis=1)
-    hand_frames = float((per_frame >= len(layout) / 2).mean()) if take.n_frames else 0.0
+    hand_frames = _hand_frames(labeled.positions[:, :len(layout)])
     if hand_frames < HAND_FRAMES:
         raise MocapInputError(path, f"no hand found: only {100 * hand_frames:.0f} % of frames have half of the "
-                                    f"{layout.name} markers labeled (is this a {layout.name} take?)")
+                                    f"{layout.name} markers labeled within {HAND_REACH:g} m of each other "
+                                    f"(is this a {layout.name} take?)")
     out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
            "hand_frames": round(hand_frames, 4), "summary": labeling.summary(settings.confident),
            "outputs": {}}
