@@ -33,6 +33,14 @@ def _reviewed(context):
     return coll if has_review(coll) else None
 
 
+def _present(cls, found, message: str) -> bool:
+    """A poll result: whether ``found`` exists, with ``message`` shown where it does not."""
+    if found is None:
+        cls.poll_message_set(message)
+        return False
+    return True
+
+
 class _ReviewOperator:
     """Shared poll and error handling of the operators that work on a labeled take."""
 
@@ -41,10 +49,7 @@ class _ReviewOperator:
 
     @classmethod
     def poll(cls, context):
-        if _reviewed(context) is None:
-            cls.poll_message_set("Label a take first (Mocap sidebar tab > Label)")
-            return False
-        return True
+        return _present(cls, _reviewed(context), "Label a take first (Mocap sidebar tab > Label)")
 
     def execute(self, context):
         from ..blender.review import load_state
@@ -120,10 +125,8 @@ class MOCAPAL_OT_label(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if _take(context) is None:
-            cls.poll_message_set("Import a take first (File > Import > C3D Markers), or select one of its markers")
-            return False
-        return True
+        return _present(cls, _take(context),
+                        "Import a take first (File > Import > C3D Markers), or select one of its markers")
 
     def _request(self, context):
         from ..blender.review import prepare_label
