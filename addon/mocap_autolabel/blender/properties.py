@@ -7,7 +7,6 @@ change; it lives in the scene so that the panel's UIList can show it and undo re
 from __future__ import annotations
 
 import bpy
-import numpy as np
 from bpy.props import (
     BoolProperty,
     CollectionProperty,
@@ -18,7 +17,7 @@ from bpy.props import (
     StringProperty,
 )
 
-from ..core.review import SURE
+from ..core.review import SURE, uncertain_segments
 
 #: How many uncertain segments the list holds at most (worst first).
 LIST_LIMIT = 1000
@@ -93,8 +92,7 @@ def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, l
 
     settings = scene.mocap_autolabel
     first = first_frame(take_coll)
-    idx = np.flatnonzero((labeling.label >= 0) & (labeling.confidence < settings.sure) & ~labeling.locked)
-    idx = idx[np.lexsort((labeling.start[idx], labeling.confidence[idx]))]
+    idx = uncertain_segments(labeling, settings.sure)
     items = settings.uncertain
     items.clear()
     for i in idx[:LIST_LIMIT]:

@@ -33,6 +33,7 @@ from ..core.review import (
     labeling_to_arrays,
     marker_classes,
     segment_classes,
+    uncertain_segments,
 )
 from ..core.take import Take
 from . import animio
@@ -322,7 +323,7 @@ def summary(labeling: Labeling, sure: float) -> dict:
     s = labeling.summary(sure)
     present = np.unique(labeling.label[labeling.label >= 0])
     return {"labels": f"{len(present)} / {len(labeling.names)}", "confident": s["confident_share"] * 100,
-            "uncertain": int(((labeling.label >= 0) & (labeling.confidence < sure) & ~labeling.locked).sum()),
+            "uncertain": len(uncertain_segments(labeling, sure)),
             "locked": int(labeling.locked.sum())}
 
 

@@ -339,11 +339,12 @@ class MOCAPAL_OT_next_uncertain(bpy.types.Operator):
         import numpy as np
 
         from ..blender.review import load_state, sample_index
+        from ..core.review import uncertain_segments
 
         coll = _reviewed(context)
         lab = load_state(coll).labeling
         sure = context.scene.mocap_autolabel.sure
-        idx = np.flatnonzero((lab.label >= 0) & (lab.confidence < sure) & ~lab.locked)
+        idx = uncertain_segments(lab, sure)
         now = sample_index(coll, context.scene.frame_current)
         starts = lab.start[idx]
         pick = idx[starts < now] if self.previous else idx[starts > now]
