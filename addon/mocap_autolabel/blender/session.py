@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.labelers.base import RememberingLabeler
-from ..core.labeling import Labeling
 from ..core.take import Take
 
 
@@ -23,7 +22,6 @@ class TakeSession:
     take: Take | None = None
     take_key: tuple = ()
     labelers: dict = field(default_factory=dict)
-    labeling: tuple[str, Labeling] | None = None  # (state token, labeling)
     classes: tuple[str, np.ndarray] | None = None  # (state token, marker classes)
 
 
