@@ -72,7 +72,7 @@ def assert_scene_shows(coll, labeling):
         np.testing.assert_array_equal(got, types[classes[idx, label]], err_msg=labeling.names[label])
         _, x = animio.read_keys(animio.find_fcurve(obj, "location", 0))
         np.testing.assert_allclose(x, take.positions[idx, slots, 0], atol=1e-6)
-    seg_class = labeling._paint(segment_classes(labeling), -1, np.int8)
+    seg_class = labeling._paint(segment_classes(labeling), -1, np.int8)  # computed here, not by null_classes
     for obj in coll["mocap_unlabeled"].objects:
         slot = int(obj["mocap_null"])
         frames, got = key_types(obj)

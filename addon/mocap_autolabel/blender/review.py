@@ -23,16 +23,17 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ..core.labeling import EMPTY, NULL, Labeling
+from ..core.labeling import EMPTY, Labeling
 from ..core.layout import Layout, load_layout
 from ..core.review import (
     CLASS_NAMES,
     KEY_TYPES,
     Review,
+    changed_labels,
     labeling_from_arrays,
     labeling_to_arrays,
     marker_classes,
-    segment_classes,
+    null_classes,
     uncertain_segments,
 )
 from ..core.take import Take
@@ -227,19 +228,12 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
     m = len(layout)
     if previous is not None and (previous.names != labeling.names or previous.per_sample().shape != per.shape):
         previous = None
-    before = previous.per_sample() if previous is not None else None
 
     # Labeled markers: (F, M, 3) positions in layout order.
     f, s = np.nonzero(per >= 0)
     xyz = np.full((take.n_frames, m, 3), np.nan, dtype=np.float32)
     xyz[f, per[f, s]] = take.positions[f, s] * scale
-    if previous is None:
-        todo = range(m)
-    else:
-        old = marker_classes(previous)
-        moved = set(np.unique(before[before != per])) | set(np.unique(per[before != per]))
-        moved |= set(np.flatnonzero((old != classes).any(axis=0)))
-        todo = sorted(int(v) for v in moved if v >= 0)
+    todo = range(m) if previous is None else changed_labels(previous, labeling).tolist()
     objs = _labeled_objects(labeled)
     for label in todo:
         obj = objs.get(label)
@@ -256,15 +250,11 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
                 fc.group.color_set = FINGER_COLOR_SETS[finger]
 
     # Unlabeled samples, one empty per slot that has any.
-    seg_class = segment_classes(labeling)
-    null_class = labeling._paint(seg_class, -1, np.int8)
-    null_class[per != NULL] = -1
+    null_class = null_classes(labeling)
     if previous is None:
         slots = np.flatnonzero((null_class >= 0).any(axis=0))
     else:
-        old_null = previous._paint(segment_classes(previous), -1, np.int8)
-        old_null[before != NULL] = -1
-        slots = np.flatnonzero((old_null != null_class).any(axis=0))
+        slots = np.flatnonzero((null_classes(previous) != null_class).any(axis=0))
     nulls = _null_objects(unlabeled)
     for slot in slots:
         valid = null_class[:, slot] >= 0

@@ -43,6 +43,13 @@ def marker_classes(labeling: Labeling) -> np.ndarray:
     return out
 
 
+def null_classes(labeling: Labeling) -> np.ndarray:
+    """int8 ``(frames, points)``: the class of each unassigned (null) sample's segment, -1 elsewhere."""
+    out = labeling._paint(segment_classes(labeling), -1, np.int8)
+    out[labeling.per_sample() != NULL] = -1
+    return out
+
+
 def uncertain_segments(labeling: Labeling, sure: float = SURE) -> np.ndarray:
     """Indices of the unlocked labeled segments below ``sure``, worst first (then by start frame)."""
     idx = np.flatnonzero((labeling.label >= 0) & (labeling.confidence < sure) & ~labeling.locked)
@@ -141,12 +148,6 @@ class Review:
         return cls([Constraint(*(int(v) for v in row)) for row in c], [(int(a), int(b)) for a, b in s])
 
 
-def carrier(labeling: Labeling, label: int, frame: int) -> int | None:
-    """The slot that carries ``label`` at ``frame`` (0-based), or None."""
-    seg = np.flatnonzero((labeling.label == label) & (labeling.start <= frame) & (labeling.stop > frame))
-    return int(labeling.slot[seg[0]]) if len(seg) else None
-
-
 def _paint_flags(labeling: Labeling) -> np.ndarray:
     return labeling._paint(labeling.locked, False, bool)
 
@@ -212,14 +213,11 @@ def labeling_to_arrays(labeling: Labeling) -> dict:
 
 def labeling_from_arrays(data, info: dict | None = None) -> Labeling:
     """Inverse of :func:`labeling_to_arrays` (any mapping whose arrays numpy can read)."""
-    n = len(np.asarray(data["slot"]))
     return Labeling(names=list(data["names"]), n_frames=int(data["n_frames"]), n_points=int(data["n_points"]),
-                    slot=np.asarray(data["slot"], dtype=np.int64)[:n],
-                    start=np.asarray(data["start"], dtype=np.int64)[:n],
-                    stop=np.asarray(data["stop"], dtype=np.int64)[:n],
-                    label=np.asarray(data["label"], dtype=np.int16)[:n],
-                    confidence=np.asarray(data["confidence"], dtype=np.float32)[:n],
-                    locked=np.asarray(data["locked"], dtype=bool)[:n], info=dict(info or {}))
+                    slot=np.asarray(data["slot"], dtype=np.int64), start=np.asarray(data["start"], dtype=np.int64),
+                    stop=np.asarray(data["stop"], dtype=np.int64), label=np.asarray(data["label"], dtype=np.int16),
+                    confidence=np.asarray(data["confidence"], dtype=np.float32),
+                    locked=np.asarray(data["locked"], dtype=bool), info=dict(info or {}))
 
 
 def changed_labels(before: Labeling, after: Labeling) -> np.ndarray:
