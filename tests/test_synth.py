@@ -209,3 +209,32 @@ def test_bone_scale_changes_proportions_only_where_asked():
     ratio = varied.bone_lengths / plain.bone_lengths
     assert ratio[BONE_NAMES.index("index_mid")] == pytest.approx(1.1)
     assert np.delete(ratio, BONE_NAMES.index("index_mid")) == pytest.approx(1.0)
+
+
+def test_misplacement_moves_finger_markers_towards_the_middle_of_the_hand():
+    from mocap_autolabel.core.hand.skeleton import BONE_NAMES
+    from mocap_autolabel.core.synth.frames import _misplacement
+
+    layout = load_layout("han19")
+    for side in ("left", "right"):
+        hand = HandModel(side=side)
+        binding = layout.place(hand)[0]
+        assert not _misplacement(np.random.default_rng(0), binding, hand, 0.0, 0.0).any()
+        bone = np.array(BONE_NAMES)[binding.bones[:, 0]]
+        little, index = layout.names.index("PinkyTip"), layout.names.index("IndexTip")
+        shifts = []
+        for seed in range(200):
+            off = _misplacement(np.random.default_rng(seed), binding, hand, 0.0, 0.02)
+            moved = np.flatnonzero(np.abs(off).sum(axis=1) > 0)
+            fingers = ("index", "middle", "ring", "little")
+            assert set(bone[moved]) <= {f"{f}_{s}" for f in fingers for s in ("mid", "dist")}
+            assert not off[:, 1:].any()  # sideways only
+            x = off[:, 0] * hand.thumb_side  # towards the thumb
+            assert np.sign(x[little]) == -np.sign(x[index]) or x[little] == 0
+            shifts.append(x[little])
+        assert -0.005 - 1e-9 <= min(shifts) and max(shifts) <= 0.02 + 1e-9 and np.mean(shifts) > 0.005
+        spread = np.std([_misplacement(np.random.default_rng(s), binding, hand, 0.003, 0.0) for s in range(300)],
+                        axis=0)
+        distal = np.char.endswith(bone, "_dist")
+        assert spread[distal].mean() == pytest.approx(0.006, rel=0.1)
+        assert spread[~distal].mean() == pytest.approx(0.003, rel=0.1)

@@ -63,7 +63,7 @@ def shipped_layouts() -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.confidence", description=__doc__.splitlines()[0])
-    ap.add_argument("--takes", type=int, default=16, help="synthetic takes per layout (default 16)")
+    ap.add_argument("--takes", type=int, default=32, help="synthetic takes per layout (default 32)")
     ap.add_argument("--frames", type=int, default=2000, help="frames labeled per take (default 2000)")
     ap.add_argument("--only", nargs="*", help="method/temporal pairs (default: all of COMBOS)")
     ap.add_argument("--out", default=CALIBRATIONS)
@@ -88,10 +88,10 @@ def main(argv: list[str] | None = None) -> int:
                 seg.append(segment_outcomes(labeling, take, truth))
             seg = np.concatenate(seg)
             source = f"{len(data)} synthetic takes x {args.frames} frames, seeds {SEED0}+"
-            right = seg[:, 4].astype(bool)
-            cal = fit_calibration(seg[:, :4], right, source)
+            evidence, right = seg[:, :-1], seg[:, -1].astype(bool)
+            cal = fit_calibration(evidence, right, source)
             table[calibration_key(method, temporal, name)] = cal.as_dict()
-            hi = cal(seg[:, :4]) >= 0.95
+            hi = cal(evidence) >= 0.95
             print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
                   f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "
                   "right", file=sys.stderr)
