@@ -26,8 +26,8 @@ LENGTH_EDGES = (5, 30)
 #: A confidence of at least SURE promises that such segments were right at least SURE_ACCURACY of
 #: the time on validation data (a lower confidence bound, not the point estimate): reviewers may
 #: skip them. Below SURE the confidence is the calibrated chance of being right. The promise made
-#: to users is 99.9 %. (A margin, 99.95 %, moved the real figure by 0.01 points and, with one
-#: perfectly scored wrong segment near the top, left no segment sure at all: none.)
+#: to users is 99.9 %. A margin (99.95 %) moved the real figure by only 0.01 points, and one
+#: wrong segment scored near the top then left no segment sure at all.
 SURE, SURE_ACCURACY = 0.95, 0.999
 
 
