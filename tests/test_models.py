@@ -126,3 +126,25 @@ def test_onnxruntime_agrees_with_torch(method, tmp_path):
     if method == "set":
         expected, got = expected[fr.mask], got[fr.mask]  # padded rows are not outputs
     np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-4)
+
+
+def test_scaling_sinkhorn_matches_the_log_domain_one():
+    """The exported graphs run Sinkhorn in matrix-scaling form; it must equal the log-domain form
+    that training differentiates, also for the wide score ranges of trained models and padding."""
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch==2.13.0)")
+    from training.sinkhorn import NEG, log_sinkhorn_dustbin, scaling_sinkhorn_dustbin
+
+    gen = torch.Generator().manual_seed(0)
+    b, k, m = 64, 24, 19
+    scores = torch.randn(b, k, m, generator=gen) * 12.0  # logits spanning about 100 nats
+    obs_null = torch.randn(b, k, generator=gen) * 6.0
+    label_null = torch.randn(b, m, generator=gen) * 3.0
+    mask = (torch.rand(b, k, generator=gen) < 0.8).float()
+    mask[:, 0] = 1.0
+    mask[0] = 1.0  # a frame with no padding
+    expected = log_sinkhorn_dustbin(scores, obs_null, label_null, mask, 10)
+    got = scaling_sinkhorn_dustbin(scores, obs_null, label_null, mask, 10)
+    real = torch.cat([mask > 0.5, torch.ones(b, 1, dtype=torch.bool)], dim=1)
+    assert torch.isfinite(got).all()
+    np.testing.assert_allclose(got[real].numpy(), expected[real].numpy(), rtol=1e-4, atol=2e-4)
+    assert (got[~real] == NEG).all()

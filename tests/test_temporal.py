@@ -72,6 +72,20 @@ def test_exclusive_assignment_is_optimal(seed):
                 assert labels[a] != labels[b]
 
 
+def test_a_segment_whose_best_labels_are_taken_takes_its_next_free_one():
+    """Every label that outweighs null is a candidate, not only a segment's first few (a thumb tip
+    inside a fist reads as the four finger markers around it, which their own segments hold)."""
+    m = 6
+    weights = np.zeros((5, m + 1))
+    weights[0, :5] = [10.0, 9.0, 8.0, 7.0, 6.0]  # the 5th label, free, still beats null (0)
+    for s in range(1, 5):
+        weights[s, s - 1] = 100.0  # overlapping segments that own labels 0-3
+    segs = _segments([0, 0, 5, 10, 15], [20, 20, 20, 20, 20])
+    labels = exclusive_assignment(weights, segs)
+    assert labels.tolist() == [4, 0, 1, 2, 3]
+    assert exclusive_assignment(weights, segs, candidates=4)[0] == NULL  # the old cut-off lost it
+
+
 def test_exclusivity_is_an_assignment_not_greedy():
     # Both overlapping segments prefer label 0. Greedy (strongest first) gives segment 1 label 0
     # and segment 0 label 1: 10.5 + 2. The assignment gives 10 + 9.8.

@@ -7,7 +7,7 @@ import math
 import torch
 from torch import nn
 
-from .sinkhorn import NEG, log_sinkhorn_dustbin
+from .sinkhorn import NEG, log_sinkhorn_dustbin, scaling_sinkhorn_dustbin
 
 
 class PairBiasAttention(nn.Module):
@@ -70,8 +70,10 @@ class SetLabeler(nn.Module):
         self.obs_null = nn.Linear(dim, 1)
         self.label_null = nn.Parameter(torch.zeros(n_labels))
 
-    def forward(self, points: torch.Tensor, mask: torch.Tensor, axes: torch.Tensor) -> torch.Tensor:
-        """``axes``: ``(B, 3, 3)`` principal axes of each frame's cloud (columns, largest variance first)."""
+    def forward(self, points: torch.Tensor, mask: torch.Tensor, axes: torch.Tensor,
+                sinkhorn=log_sinkhorn_dustbin) -> torch.Tensor:
+        """``axes``: ``(B, 3, 3)`` principal axes of each frame's cloud (columns, largest variance first);
+        ``sinkhorn``: its log-domain form (training) or the scaling form (export), same result."""
         b, k, _ = points.shape
         n = mask.sum(dim=1, keepdim=True)
         centroid = (points * mask[:, :, None]).sum(1, keepdim=True) / n[:, :, None]
@@ -101,19 +103,19 @@ class SetLabeler(nn.Module):
             x = block(x, bias[:, i * self.heads:(i + 1) * self.heads], rbf)
         x = self.norm(x)
         scores = self.project(x) @ self.labels.t() * (1.0 / math.sqrt(x.shape[-1]))
-        return log_sinkhorn_dustbin(scores, self.obs_null(x)[..., 0], self.label_null.expand(b, -1), mask,
-                                    self.iters)
+        return sinkhorn(scores, self.obs_null(x)[..., 0], self.label_null.expand(b, -1), mask, self.iters)
 
 
 class ObservationScores(nn.Module):
-    """Export wrapper: keeps the observation rows, ``(B, K, M + 1)``, the labeler protocol's scores."""
+    """Export wrapper of :class:`SetLabeler`: the scaling-form Sinkhorn, and only the observation
+    rows, ``(B, K, M + 1)``, the labeler protocol's scores."""
 
-    def __init__(self, net: nn.Module):
+    def __init__(self, net: SetLabeler):
         super().__init__()
         self.net = net
 
-    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
-        return self.net(*inputs)[:, :-1, :]
+    def forward(self, points: torch.Tensor, mask: torch.Tensor, axes: torch.Tensor) -> torch.Tensor:
+        return self.net(points, mask, axes, sinkhorn=scaling_sinkhorn_dustbin)[:, :-1, :]
 
 
 def sinkhorn_normalise(d: torch.Tensor, iters: int) -> torch.Tensor:

@@ -156,7 +156,7 @@ def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: s
 
 
 def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[int, int] | None = None,
-                         candidates: int = 4, time_limit: float = 60.0) -> np.ndarray:
+                         candidates: int | None = None, time_limit: float = 60.0) -> np.ndarray:
     """The best label per segment (:data:`NULL` allowed) such that no two segments that overlap
     in time share a label. ``locked`` fixes some segments' labels.
 
@@ -164,7 +164,10 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
         weights: ``(S, M + 1)`` (see :func:`segment_weights`), null in the last column.
         segments: their frame ranges.
         locked: ``{segment: label or NULL}``.
-        candidates: labels considered per segment (its best by weight); null is always one.
+        candidates: labels considered per segment (its best by weight; None: all); null is always
+            one. Only labels that outweigh null are ever considered, so all of them stay few: a
+            segment whose top labels are all taken by overlapping segments can still take its
+            fifth (a thumb tip inside a fist that reads as the fingers it touches).
 
     Returns:
         int64 ``(S,)`` labels.
@@ -174,7 +177,7 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     locked = locked or {}
     if n == 0:
         return np.zeros(0, dtype=np.int64)
-    top = np.argsort(-weights[:, :m], axis=1)[:, :min(candidates, m)]
+    top = np.argsort(-weights[:, :m], axis=1)[:, :min(candidates or m, m)]
     # A label weighing no more than null is never worth taking: null scores higher and frees the
     # label for others. Leaving such candidates out is exact and keeps the groups small.
     useful = np.take_along_axis(weights, top, axis=1) > weights[:, m:m1]
