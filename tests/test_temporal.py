@@ -14,7 +14,7 @@ from mocap_autolabel.core.metrics import segments_right
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
-from mocap_autolabel.core.temporal.confidence import fit_calibration
+from mocap_autolabel.core.temporal.confidence import fit_calibration, load_null_prior
 from mocap_autolabel.core.temporal.viterbi import viterbi_labels
 from mocap_autolabel.core.temporal.voting import (
     Samples,
@@ -23,6 +23,7 @@ from mocap_autolabel.core.temporal.voting import (
     find_swaps,
     segment_of,
     split_segments,
+    vote,
 )
 
 
@@ -84,6 +85,33 @@ def test_a_segment_whose_best_labels_are_taken_takes_its_next_free_one():
     labels = exclusive_assignment(weights, segs)
     assert labels.tolist() == [4, 0, 1, 2, 3]
     assert exclusive_assignment(weights, segs, candidates=4)[0] == NULL  # the old cut-off lost it
+
+
+def test_null_prior_is_paid_once_per_segment():
+    """A label must beat null by the prior over the whole segment: a 3-frame flicker with a weak
+    lead becomes null, a 50-frame track with the same per-frame lead keeps its label."""
+    frame = np.concatenate([np.arange(60, 63), np.arange(50)])  # the flicker comes after the track
+    slot = np.concatenate([np.zeros(3), np.ones(50)]).astype(np.int64)
+    logp = np.tile(np.log(np.array([[0.6, 0.05, 0.05, 0.3]], dtype=np.float32)), (len(frame), 1))
+    samples = Samples(frame=frame, slot=slot, logp=logp, label=np.zeros(len(frame), dtype=np.int64),
+                      confidence=np.full(len(frame), 0.6, dtype=np.float32))
+    segs = _segments([60, 0], [63, 50], slots=[0, 1])
+    locked_at = np.full((70, 2), EMPTY, dtype=np.int16)
+    _, labels, _, _ = vote(samples, segs, locked_at, split_swaps=False)
+    assert labels.tolist() == [0, 0]
+    _, labels, _, _ = vote(samples, segs, locked_at, split_swaps=False, null_prior=(4.0, 0.0))  # lead 3 x 0.69
+    assert labels.tolist() == [NULL, 0]
+
+
+def test_label_take_uses_the_shipped_null_prior_unless_given_one():
+    layout = load_layout("glove13")
+    s = synthesize(layout, 240, seed=4)
+    shipped = load_null_prior("set", "vote", "glove13")
+    assert shipped[0] > 0.0  # fitted by training.confidence for the default pipeline
+    assert label_take(s.take, layout).info["null_prior"] == list(shipped)
+    assert label_take(s.take, layout, null_prior=(0.0, 0.0)).info["null_prior"] == [0.0, 0.0]
+    assert label_take(s.take, layout, score="power").info["null_prior"] == [0.0, 0.0]  # fitted for likelihood only
+    assert load_null_prior("set", "vote", "no_such_layout") == (0.0, 0.0)
 
 
 def test_exclusivity_is_an_assignment_not_greedy():

@@ -22,7 +22,7 @@ from .labelers.assign import assign, row_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
 from .layout import Layout
 from .take import Take
-from .temporal.confidence import load_calibration, segment_evidence
+from .temporal.confidence import load_calibration, load_null_prior, segment_evidence
 from .temporal.voting import (
     LOG_FLOOR,
     Samples,
@@ -111,6 +111,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                start: np.ndarray | None = None, score: str = "likelihood", p: float = 2.0, q: float = -0.5,
                n_best: int = 5, split_swaps: bool = True, labeler: Labeler | None = None, calibrate: bool = True,
                validate: bool = False, hand: Calibration | None = None, splits: Sequence[tuple[int, int]] = (),
+               null_prior: tuple[float, float] | None = None,
                progress: Callable[[str], None] | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
@@ -133,6 +134,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             again with the fit's evidence, and downgrade segments the hand cannot explain.
         hand: the performer's calibration for ``validate`` (default: calibrated on this take).
         splits: ``(slot, frame)`` points where a reviewer cut a tracklet: decided in two parts.
+        null_prior: ``(per segment, per sample)`` nats a label must beat null by in the ``vote``
+            with the ``likelihood`` score (:func:`.temporal.voting.vote`); default: the one fitted
+            for this method and layout, shipped beside the confidence calibration.
         progress: called with a short message at each stage.
 
     Returns:
@@ -181,9 +185,13 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     info = {"method": method, "temporal": temporal, "layout": layout.name, "frames": take.n_frames,
             "slots": take.n_points, "constraints": len(constraints)}
 
+    if null_prior is None:
+        null_prior = load_null_prior(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
+    info["null_prior"] = [float(v) for v in null_prior]
+
     def decide(scores: np.ndarray) -> Labeling:
         return _decide(scores, batch, take, layout, method, temporal, segments, locked_at, info, score, p, q,
-                       split_swaps, n_best, calibrate)
+                       split_swaps, n_best, calibrate, null_prior)
 
     say(f"temporal step: {temporal}")
     t = time.perf_counter()
@@ -208,7 +216,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
 
 def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, method: str, temporal: str,
             segments: Segments, locked_at: np.ndarray, info: dict, score: str, p: float, q: float,
-            split_swaps: bool, n_best: int, calibrate: bool) -> Labeling:
+            split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float]) -> Labeling:
     """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
@@ -218,7 +226,8 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
     samples = Samples(frame=f_idx.astype(np.int64), slot=slots[f_idx, k_idx].astype(np.int64), logp=logp,
                       label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
     if temporal == "vote":
-        segments, label, seg, facts = vote(samples, segments, locked_at, score, p, q, split_swaps)
+        segments, label, seg, facts = vote(samples, segments, locked_at, score, p, q, split_swaps,
+                                           null_prior=null_prior)
         info.update(facts)
         first_locked = locked_at[segments.start, segments.slot]
         labeling = Labeling(names=layout.names, n_frames=take.n_frames, n_points=take.n_points,

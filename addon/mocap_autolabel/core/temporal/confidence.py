@@ -184,3 +184,15 @@ def load_calibration(method: str, temporal: str, layout: str, path: str = CALIBR
         return None
     return Calibration(entry["weights"], entry["x"], entry["y"], entry["sure"], entry.get("segments", 0),
                        entry.get("source", ""))
+
+
+def load_null_prior(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> tuple[float, float]:
+    """The shipped null prior ``(per segment, per sample)`` of a method, temporal mode and layout
+    (see :func:`.voting.vote`); no prior where none was fitted."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            entry = json.load(fh).get(calibration_key(method, temporal, layout)) or {}
+    except (OSError, ValueError):
+        entry = {}
+    prior = entry.get("null_prior", (0.0, 0.0))
+    return float(prior[0]), float(prior[1])
