@@ -117,7 +117,13 @@ def _fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-3) -> np.ndarray:
         grad = x.T @ (p - y) / len(y) + 2 * l2 * np.concatenate([w[:-1], [0.0]])
         return nll, grad
 
-    return minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B").x
+    # Every evidence column is "more is better" (a longer segment with the same per-frame evidence
+    # is no less likely right): non-negative weights keep the score monotone in each. Unbounded,
+    # the length weight fitted slightly negative once the vote's null prior had removed most
+    # short wrong segments, and 2,400-frame real tracklets with 99.6 % mean probability fell
+    # just short of "sure".
+    bounds = [(0.0, None)] * (x.shape[1] - 1) + [(None, None)]
+    return minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B", bounds=bounds).x
 
 
 def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "") -> Calibration:
