@@ -30,6 +30,10 @@ TAKE_EXTENSIONS = (".c3d", ".trc", ".tsv")
 #: within HAND_REACH (metres) of their median: a hand is about 0.2 m long, a body capture labeled
 #: as a hand spreads its "labels" over half a metre or more.
 HAND_FRAMES, HAND_REACH = 0.3, 0.25
+#: A labeled marker counts towards "a hand is here" only if its segment's mean per-frame
+#: probability is at least this: a full-body capture labeled with a hand layout gets labels, but
+#: ones its labeler does not believe (median 0.26 on ezc3d's Vicon.c3d; 0.98 and up on hands).
+BELIEVED = 0.5
 
 
 @dataclass
@@ -144,10 +148,26 @@ def _finished(out_dir: str, name: str, settings: BatchSettings) -> dict | None:
     return report
 
 
-def _hand_frames(markers) -> float:
-    """Share of frames whose labeled markers ``(F, M, 3)`` look like one hand (see :data:`HAND_FRAMES`)."""
+def _believed(labeling, m: int):
+    """``(F, M)``: where each label sits on a segment whose mean probability reaches :data:`BELIEVED`."""
     import numpy as np
 
+    seg = labeling.segment_ids()  # (F, P)
+    frame, slot = np.nonzero(seg >= 0)
+    s = seg[frame, slot]
+    keep = (labeling.label[s] >= 0) & (labeling.evidence[s, 0] >= BELIEVED)
+    out = np.zeros((labeling.n_frames, m), dtype=bool)
+    out[frame[keep], labeling.label[s[keep]]] = True
+    return out
+
+
+def _hand_frames(markers, believed=None) -> float:
+    """Share of frames whose labeled markers ``(F, M, 3)`` look like one hand (see :data:`HAND_FRAMES`);
+    ``believed`` ``(F, M)`` keeps only those markers (see :data:`BELIEVED`)."""
+    import numpy as np
+
+    if believed is not None:
+        markers = np.where(believed[..., None], markers, np.nan)
     if not len(markers):
         return 0.0
     count = np.isfinite(markers[..., 0]).sum(axis=1)
@@ -208,7 +228,7 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
                           validate=settings.validate, hand=hand_cal)
     timings["label"] = round(time.perf_counter() - t, 4)
     labeled = labeled_take(take, labeling)
-    hand_frames = _hand_frames(labeled.positions[:, :len(layout)])
+    hand_frames = _hand_frames(labeled.positions[:, :len(layout)], _believed(labeling, len(layout)))
     if hand_frames < HAND_FRAMES:
         raise MocapInputError(path, f"no hand found: only {100 * hand_frames:.0f} % of frames have half of the "
                                     f"{layout.name} markers labeled within {HAND_REACH:g} m of each other "
