@@ -144,6 +144,22 @@ def test_find_swaps_cuts_where_the_evidence_flips():
     assert find_swaps(samples, np.zeros(frames, dtype=np.int64), segs) == {}
 
 
+def test_find_swaps_cuts_a_swap_in_the_first_or_last_frames():
+    """A capture system's swap one frame into a tracklet leaves too few frames for a change point:
+    a short end run that is sure of another label is cut off; a doubtful one is not."""
+    frames, m = 60, 4
+    logp = np.full((frames, m + 1), -12.0, dtype=np.float32)
+    logp[:, 1] = -0.01
+    logp[0, 1], logp[0, 2] = -12.0, -0.01  # the first frame is another marker
+    logp[57:, 1], logp[57:, 3] = -12.0, -0.01  # and the last three are a third one
+    samples = Samples(frame=np.arange(frames), slot=np.zeros(frames, dtype=np.int64), logp=logp,
+                      label=np.argmax(logp, axis=1), confidence=np.ones(frames, dtype=np.float32))
+    seg, segs = np.zeros(frames, dtype=np.int64), _segments([0], [frames])
+    assert find_swaps(samples, seg, segs) == {0: [1, 57]}
+    logp[0, 1], logp[0, 2] = -1.5, -0.3  # a doubtful first frame: kept
+    assert find_swaps(samples, seg, segs) == {0: [57]}
+
+
 def test_segments_from_runs_round_trip():
     labels = np.array([[0, 1], [0, 1], [2, NULL], [2, NULL]])
     valid = np.array([[True, True], [True, False], [True, True], [True, True]])

@@ -83,10 +83,14 @@ def segment_of(segments: Segments, frame: np.ndarray, slot: np.ndarray) -> np.nd
 
 
 def find_swaps(samples: Samples, seg: np.ndarray, segments: Segments, min_run: int = 6,
-               penalty: float = 25.0) -> dict[int, list[int]]:
+               penalty: float = 25.0, edge_penalty: float = 10.0) -> dict[int, list[int]]:
     """Frames where a segment's evidence flips from one label to another for good (a swap by the
     capture system without a gap). Binary segmentation: the best single change point of the
     summed log-probabilities, kept if it gains more than ``penalty`` nats, then each side again.
+    A swap in a segment's first or last frames leaves too few frames for that: a run of fewer
+    than ``min_run`` frames at either end that all prefer one other label is cut off if it gains
+    more than ``edge_penalty`` nats (a frame's log-probabilities are floored at -12, so one
+    frame that is sure of another label suffices).
 
     Returns ``{slot: [frames where a new segment begins]}``.
     """
@@ -97,6 +101,10 @@ def find_swaps(samples: Samples, seg: np.ndarray, segments: Segments, min_run: i
     best = np.argmax(samples.logp, axis=1)
     for s in range(len(segments)):
         lo, hi = bounds[s], bounds[s + 1]
+        if hi - lo > min_run:
+            for frame in _edge_swaps(samples.logp[order[lo:hi]], best[order[lo:hi]],
+                                     samples.frame[order[lo:hi]], min_run, edge_penalty):
+                cuts.setdefault(int(segments.slot[s]), []).append(frame)
         if hi - lo < 2 * min_run:
             continue
         rows = order[lo:hi]
@@ -105,6 +113,25 @@ def find_swaps(samples: Samples, seg: np.ndarray, segments: Segments, min_run: i
             continue
         for frame in _change_points(samples.logp[rows], samples.frame[rows], min_run, penalty):
             cuts.setdefault(int(segments.slot[s]), []).append(int(frame))
+    return cuts
+
+
+def _edge_swaps(logp: np.ndarray, best: np.ndarray, frames: np.ndarray, min_run: int, penalty: float) -> list[int]:
+    """Cut frames for short runs at either end of one segment (rows in frame order) that prefer
+    another label than the segment's as a whole."""
+    main = int(np.argmax(logp.sum(axis=0)))
+    cuts = []
+    for rows, cut_at in ((np.arange(len(best)), lambda n: int(frames[n])),
+                         (np.arange(len(best))[::-1], lambda n: int(frames[len(best) - n]))):
+        other = best[rows[0]]
+        if other == main:
+            continue
+        n = int(np.argmax(best[rows] != other)) if (best[rows] != other).any() else len(rows)
+        if n >= min_run or len(rows) - n < min_run:
+            continue
+        run = rows[:n]
+        if (logp[run, other] - logp[run, main]).sum() > penalty:
+            cuts.append(cut_at(n))
     return cuts
 
 
