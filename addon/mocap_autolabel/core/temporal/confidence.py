@@ -178,14 +178,18 @@ def calibration_key(method: str, temporal: str, layout: str) -> str:
     return f"{method}/{temporal}/{layout}"
 
 
-def load_calibration(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> Calibration | None:
-    """The shipped calibration for a method, temporal mode and layout, or None."""
+def _entry(method: str, temporal: str, layout: str, path: str) -> dict | None:
+    """The calibration file's entry for a method, temporal mode and layout, or None."""
     try:
         with open(path, encoding="utf-8") as fh:
-            table = json.load(fh)
+            return json.load(fh).get(calibration_key(method, temporal, layout))
     except (OSError, ValueError):
         return None
-    entry = table.get(calibration_key(method, temporal, layout))
+
+
+def load_calibration(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> Calibration | None:
+    """The shipped calibration for a method, temporal mode and layout, or None."""
+    entry = _entry(method, temporal, layout, path)
     if entry is None or tuple(entry.get("length_edges", ())) != LENGTH_EDGES or "sure" not in entry:
         return None
     return Calibration(entry["weights"], entry["x"], entry["y"], entry["sure"], entry.get("segments", 0),
@@ -195,10 +199,5 @@ def load_calibration(method: str, temporal: str, layout: str, path: str = CALIBR
 def load_null_prior(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> tuple[float, float]:
     """The shipped null prior ``(per segment, per sample)`` of a method, temporal mode and layout
     (see :func:`.voting.vote`); no prior where none was fitted."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            entry = json.load(fh).get(calibration_key(method, temporal, layout)) or {}
-    except (OSError, ValueError):
-        entry = {}
-    prior = entry.get("null_prior", (0.0, 0.0))
+    prior = (_entry(method, temporal, layout, path) or {}).get("null_prior", (0.0, 0.0))
     return float(prior[0]), float(prior[1])
