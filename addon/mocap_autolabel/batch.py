@@ -231,8 +231,8 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     hand_frames = _hand_frames(labeled.positions[:, :len(layout)], _believed(labeling, len(layout)))
     if hand_frames < HAND_FRAMES:
         raise MocapInputError(path, f"no hand found: only {100 * hand_frames:.0f} % of frames have half of the "
-                                    f"{layout.name} markers labeled within {HAND_REACH:g} m of each other "
-                                    f"(is this a {layout.name} take?)")
+                                    f"{layout.name} markers labeled with some confidence within {HAND_REACH:g} m "
+                                    f"of each other (is this a {layout.name} take?)")
     out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
            "hand_frames": round(hand_frames, 4), "summary": labeling.summary(settings.confident),
            "outputs": {}}
