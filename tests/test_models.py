@@ -103,15 +103,15 @@ def test_model_errors_name_the_file(tmp_path):
         make_labeler("set", layout, model=shipped_model("perm", "han19"))
 
 
-@pytest.mark.parametrize("method", ONNX_METHODS)
-def test_onnxruntime_agrees_with_torch(method, tmp_path):
+@pytest.mark.parametrize(("method", "model"), [(m, {}) for m in ONNX_METHODS] + [("set", {"queries": 1})])
+def test_onnxruntime_agrees_with_torch(method, model, tmp_path):
     torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch==2.13.0)")
     pytest.importorskip("onnx", reason="onnx is not installed")
     from training.inputs import get_method
 
     torch.manual_seed(0)
     layout = load_layout("glove13")
-    m = get_method(method, layout.names)
+    m = get_method(method, layout.names, **model)
     net = m.build().eval()
     fr = sample_frames(layout, 96, np.random.default_rng(0))
     path = str(tmp_path / f"{method}.onnx")
@@ -148,3 +148,20 @@ def test_scaling_sinkhorn_matches_the_log_domain_one():
     assert torch.isfinite(got).all()
     np.testing.assert_allclose(got[real].numpy(), expected[real].numpy(), rtol=1e-4, atol=2e-4)
     assert (got[~real] == NEG).all()
+
+
+def test_training_batches_group_frames_of_similar_size_and_use_each_frame_once():
+    pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch==2.13.0)")
+    from training.train import _batches
+
+    layout = load_layout("han19")
+    pool = sample_frames(layout, 1000, np.random.default_rng(0))  # distractors in half of the frames
+    batches = _batches(pool, 100, np.random.default_rng(1))
+    assert len(batches) == 10 and all(len(b) == 100 for b in batches)
+    seen = np.concatenate([b.points[:, 0, 0] for b in batches])
+    np.testing.assert_array_equal(np.sort(seen), np.sort(pool.points[:, 0, 0]))  # a partition of the pool
+    counts = [b.mask.sum(axis=1) for b in batches]
+    spread = [int(c.max() - c.min()) for c in counts]
+    assert max(spread) < int(pool.mask.sum(axis=1).max() - pool.mask.sum(axis=1).min())
+    means = [float(c.mean()) for c in counts]
+    assert means != sorted(means)  # batch order is shuffled, not small to large

@@ -43,12 +43,39 @@ class Block(nn.Module):
         return x + self.ffn(self.norm2(x))
 
 
+class LabelQueries(nn.Module):
+    """Cross-attention of the label vectors over the observations: each label looks for its point
+    in this frame, so that its scores (and its cost of staying empty) depend on the frame."""
+
+    def __init__(self, dim: int, heads: int, hidden: int):
+        super().__init__()
+        self.heads, self.head_dim = heads, dim // heads
+        self.norm_q = nn.LayerNorm(dim)
+        self.q = nn.Linear(dim, dim)
+        self.out = nn.Linear(dim, dim)
+
+    def forward(self, labels: torch.Tensor, x: torch.Tensor, padding: torch.Tensor) -> torch.Tensor:
+        """``labels`` ``(B or 1, M, D)``, ``x`` ``(B, K, D)`` (normalised), ``padding`` ``(B, 1, 1, K)``
+        additive bias. Returns ``(B, M, D)``."""
+        b, k, d = x.shape
+        m = labels.shape[1]
+        # The first block's labels are the same in every frame: its query is computed once. Keys and
+        # values are the points' own (normalised) vectors, split in heads: no projections, since
+        # this block must cost little next to the point blocks.
+        q = self.q(self.norm_q(labels)).reshape(labels.shape[0], m, self.heads, self.head_dim).transpose(1, 2)
+        kv = x.reshape(b, k, self.heads, self.head_dim).transpose(1, 2)  # (B, H, K, dh)
+        att = torch.softmax(q @ kv.transpose(-1, -2) * (1.0 / math.sqrt(self.head_dim)) + padding, dim=-1)
+        return labels + self.out((att @ kv).transpose(1, 2).reshape(b, m, d))
+
+
 class SetLabeler(nn.Module):
     """``set``: attention over the observed point set, invariant to order, rotation, translation and mirroring.
 
     Geometry enters only through distances: each point's distances to its nearest neighbours and
     to the centroid (its features), and radial-basis-encoded pairwise distances (attention biases).
-    Scores against the labels and the two dustbins go through a log-domain Sinkhorn.
+    With ``queries`` > 0, the label vectors then attend over the points (:class:`LabelQueries`), so
+    that each label's scores and its cost of staying empty fit the frame. Scores against the labels
+    and the two dustbins go through a log-domain Sinkhorn.
 
     Input: ``points`` float32 ``(B, K, 3)`` metres, ``mask`` float32 ``(B, K)``, ``axes`` float32
     ``(B, 3, 3)`` principal axes of the frame (only |coordinates| on them are used).
@@ -56,7 +83,7 @@ class SetLabeler(nn.Module):
     """
 
     def __init__(self, n_labels: int, dim: int = 48, heads: int = 4, layers: int = 3, hidden: int = 96,
-                 knn: int = 8, rbf: int = 16, rbf_max: float = 0.24, iters: int = 10):
+                 knn: int = 8, rbf: int = 16, rbf_max: float = 0.24, iters: int = 10, queries: int = 0):
         super().__init__()
         self.n_labels, self.knn, self.iters, self.heads, self.layers = n_labels, knn, iters, heads, layers
         self.register_buffer("centres", torch.linspace(0.0, rbf_max, rbf))
@@ -69,6 +96,9 @@ class SetLabeler(nn.Module):
         self.labels = nn.Parameter(torch.randn(n_labels, dim) * 0.1)
         self.obs_null = nn.Linear(dim, 1)
         self.label_null = nn.Parameter(torch.zeros(n_labels))
+        self.queries = nn.ModuleList(LabelQueries(dim, heads, hidden) for _ in range(queries))
+        if queries:
+            self.query_null = nn.Linear(dim, 1)
 
     def forward(self, points: torch.Tensor, mask: torch.Tensor, axes: torch.Tensor,
                 sinkhorn=log_sinkhorn_dustbin) -> torch.Tensor:
@@ -102,8 +132,14 @@ class SetLabeler(nn.Module):
         for i, block in enumerate(self.blocks):
             x = block(x, bias[:, i * self.heads:(i + 1) * self.heads], rbf)
         x = self.norm(x)
-        scores = self.project(x) @ self.labels.t() * (1.0 / math.sqrt(x.shape[-1]))
-        return sinkhorn(scores, self.obs_null(x)[..., 0], self.label_null.expand(b, -1), mask, self.iters)
+        labels, label_null = self.labels[None], self.label_null.expand(b, -1)
+        if len(self.queries):
+            padding = ((1.0 - mask) * NEG)[:, None, None, :]
+            for q in self.queries:
+                labels = q(labels, x, padding)
+            label_null = label_null + self.query_null(labels)[..., 0]
+        scores = self.project(x) @ labels.transpose(1, 2) * (1.0 / math.sqrt(x.shape[-1]))
+        return sinkhorn(scores, self.obs_null(x)[..., 0], label_null, mask, self.iters)
 
 
 class ObservationScores(nn.Module):

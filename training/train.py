@@ -101,6 +101,18 @@ def evaluate(method: Method, net: torch.nn.Module, layout: Layout, frames: Label
     return calibrate_null(scores, frames, len(layout))
 
 
+def _batches(pool: LabeledFrames, size: int, rng: np.random.Generator) -> list[LabeledFrames]:
+    """``pool`` cut into batches of ``size`` frames with similar point counts, in random order.
+
+    A batch is padded to its fullest frame, and the pair tensors grow with the square of that:
+    frames with distractors (up to 30 points) batched apart from those without (up to 22) make
+    the average step cheaper at no cost in what is learned from each frame.
+    """
+    order = np.argsort(pool.mask.sum(axis=1) + rng.random(len(pool)), kind="stable")
+    out = [pool[order[i:i + size]] for i in range(0, len(pool) - size + 1, size)]
+    return [out[i] for i in rng.permutation(len(out))]
+
+
 #: Runs shorter than this train eagerly: compiling costs about 80 s on this machine.
 COMPILE_FROM_STEPS = 2000
 
@@ -122,14 +134,12 @@ def train(layout: Layout, recipe: Recipe, progress: Callable | None = _progress)
     val = validation_frames(layout, recipe)
     started = time.perf_counter()
     step_net = torch.compile(net, dynamic=True) if recipe.compile and recipe.steps >= COMPILE_FROM_STEPS else net
-    pool = sample_frames(layout, recipe.chunk, rng, cfg)
-    used = 0
+    batches: list[LabeledFrames] = []
     ema = None
     for step in range(recipe.steps):
-        if used + recipe.batch > recipe.chunk:
-            pool, used = sample_frames(layout, recipe.chunk, rng, cfg), 0
-        batch = pool[used:used + recipe.batch]
-        used += recipe.batch
+        if not batches:
+            batches = _batches(sample_frames(layout, recipe.chunk, rng, cfg), recipe.batch, rng)
+        batch = batches.pop()
         k = max(1, int(batch.mask.sum(axis=1).max()))
         batch = LabeledFrames(batch.points[:, :k], batch.labels[:, :k], batch.mask[:, :k], batch.markers)
         try:
