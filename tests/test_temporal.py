@@ -299,6 +299,36 @@ def test_confidence_of_095_is_earned_by_a_pure_group():
     assert correct[sure].mean() >= 0.999
 
 
+def test_segments_tied_at_the_sure_threshold_are_all_counted():
+    # 2,000 right segments scored highest, then 100 tied ones of which 10 are wrong: the tie
+    # cannot be cut, so it stays below "sure" and the promise holds.
+    n_top, n_tie = 2000, 100
+    p = np.concatenate([np.full(n_top, 0.999), np.full(n_tie, 0.99), np.linspace(0.1, 0.9, 2000)])
+    correct = np.concatenate([np.ones(n_top, bool), np.arange(n_tie) < 90, np.arange(2000) % 2 == 0])
+    evidence = np.column_stack([p, np.ones(len(p)), np.zeros(len(p)), np.full(len(p), 50.0)])
+    cal = fit_calibration(evidence, correct)
+    sure = cal(evidence) >= 0.95
+    assert sure[:n_top].all() and not sure[n_top:].any()
+    assert correct[sure].mean() >= 0.999
+
+
+def test_a_short_marker_label_is_never_sure_but_a_short_null_can_be():
+    rng = np.random.default_rng(2)
+    n = 6000
+    length = np.where(np.arange(n) % 2 == 0, 3.0, 50.0)  # short and long segments
+    good = np.arange(n) < 4000  # strong evidence and right; the rest weak and mostly wrong
+    p = np.where(good, 0.99, 0.5)
+    evidence = np.column_stack([p, np.where(good, 1.0, 0.5), np.where(good, 8.0, 0.5), length])
+    cal = fit_calibration(evidence, good | (rng.random(n) < 0.3))
+    short = length < 5
+    labeled = rng.random(n) < 0.5
+    assert (cal(evidence)[good] >= 0.95).all()  # without labels, every strong segment earned it
+    conf = cal(evidence, labeled=labeled)[good]
+    short, labeled = short[good], labeled[good]
+    assert (conf[short & labeled] < 0.95).all()
+    assert (conf[short & ~labeled] >= 0.95).all() and (conf[~short] >= 0.95).all()
+
+
 def test_empty_and_ghost_flooded_takes(han19, synth_take):
     empty = Take(positions=np.full((10, 3, 3), np.nan, dtype=np.float32), names=["*0", "*1", "*2"], rate=100.0,
                  source="empty.c3d")

@@ -249,7 +249,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
     labeling.confidence = labeling.evidence[:, 0].copy()  # the mean probability, until calibrated
     calibration = load_calibration(method, temporal, layout.name) if calibrate else None
     if calibration is not None:
-        labeling.confidence = calibration(labeling.evidence)
+        labeling.confidence = calibration(labeling.evidence, labeled=labeling.label >= 0)
     labeling.confidence[labeling.locked] = 1.0
     info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
     return labeling

@@ -29,6 +29,11 @@ LENGTH_EDGES = (5, 30)
 #: to users is 99.9 %. A margin (99.95 %) moved the real figure by only 0.01 points, and one
 #: wrong segment scored near the top then left no segment sure at all.
 SURE, SURE_ACCURACY = 0.95, 0.999
+#: A marker label held for fewer than LENGTH_EDGES[0] frames is never "sure", whatever its evidence:
+#: every sure-but-wrong segment seen on the han2018 raw takes (8 over two model versions) was a
+#: 2-6-frame ghost with perfect per-frame evidence, sitting where a hidden marker would be. Such
+#: labels are few and quick to check. Null decisions of short ghosts keep their calibration.
+SHORT_LABEL = LENGTH_EDGES[0]
 
 
 EVIDENCE = ("mean probability", "agreement", "margin", "length")
@@ -83,15 +88,20 @@ class Calibration:
     segments: int = 0
     source: str = ""
 
-    def __call__(self, evidence: np.ndarray) -> np.ndarray:
+    def __call__(self, evidence: np.ndarray, labeled: np.ndarray | None = None) -> np.ndarray:
+        """Confidence ``(S,)`` of segments with ``evidence`` ``(S, 4)``; ``labeled`` ``(S,)`` bool
+        marks those given a marker's label (not null): such a segment shorter than the first
+        length band is never "sure" (see :data:`SHORT_LABEL`)."""
         raw = _score(evidence, self.weights)
         band = np.searchsorted(LENGTH_EDGES, evidence[:, 3], side="right")
+        can_be_sure = np.ones(len(raw), dtype=bool) if labeled is None else ~(np.asarray(labeled) & (band == 0))
         out = np.empty(len(raw), dtype=np.float32)
         for b in range(len(LENGTH_EDGES) + 1):
             sel = band == b
             if sel.any():
                 y = np.interp(raw[sel], self.x[b], self.y[b])
-                out[sel] = np.where(raw[sel] >= self.sure[b], np.maximum(y, SURE), np.minimum(y, SURE - 1e-3))
+                sure = (raw[sel] >= self.sure[b]) & can_be_sure[sel]
+                out[sel] = np.where(sure, np.maximum(y, SURE), np.minimum(y, SURE - 1e-3))
         return out
 
     def as_dict(self) -> dict:
@@ -132,7 +142,8 @@ def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "")
     from scipy.optimize import isotonic_regression
 
     correct = np.asarray(correct, dtype=bool)
-    weights = _fit_logistic(_features(evidence), correct.astype(float))
+    # Rounded as stored: the sure threshold below must hold for the weights that are shipped.
+    weights = [round(float(w), 6) for w in _fit_logistic(_features(evidence), correct.astype(float))]
     raw = _score(evidence, weights)
     length = evidence[:, 3]
     band = np.searchsorted(LENGTH_EDGES, length, side="right")
@@ -164,10 +175,14 @@ def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "")
     # bands together: the score includes length, and the promise is about all segments.
     order = np.argsort(-raw, kind="stable")
     right = np.cumsum(correct[order])
-    ok = np.flatnonzero(_wilson_lower(right, np.arange(1, len(raw) + 1), z=1.0) >= SURE_ACCURACY)
-    tau = float(raw[order][ok[-1]]) if len(ok) else 2.0
+    ranked = raw[order]
+    # Only at the last of equal scores: every segment scored at the threshold is sure, so all of
+    # them must be in the count (saturated scores come in large ties).
+    group_end = np.append(ranked[1:] < ranked[:-1], True)
+    ok = np.flatnonzero(group_end & (_wilson_lower(right, np.arange(1, len(raw) + 1), z=1.0) >= SURE_ACCURACY))
+    tau = float(ranked[ok[-1]]) if len(ok) else 2.0
     sure = [2.0 if s == 2.0 else tau for s in sure]
-    return Calibration([round(float(w), 6) for w in weights], xs, ys, sure, int(len(raw)), source)
+    return Calibration(weights, xs, ys, sure, int(len(raw)), source)
 
 
 CALIBRATIONS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
