@@ -29,10 +29,11 @@ LENGTH_EDGES = (5, 30)
 #: to users is 99.9 %. A margin (99.95 %) moved the real figure by only 0.01 points, and one
 #: wrong segment scored near the top then left no segment sure at all.
 SURE, SURE_ACCURACY = 0.95, 0.999
-#: A marker label held for fewer than LENGTH_EDGES[0] frames is never "sure", whatever its evidence:
-#: every sure-but-wrong segment seen on the han2018 raw takes (8 over two model versions) was a
-#: 2-6-frame ghost with perfect per-frame evidence, sitting where a hidden marker would be. Such
-#: labels are few and quick to check. Null decisions of short ghosts keep their calibration.
+#: A marker label held for fewer than this many frames (the first length band) is never "sure",
+#: whatever its evidence: every sure-but-wrong segment seen on the han2018 raw takes (8 over two
+#: model versions) was a 2-6-frame ghost with perfect per-frame evidence, sitting where a hidden
+#: marker would be. Such labels are few and quick to check. Null decisions of short ghosts keep
+#: their calibration.
 SHORT_LABEL = LENGTH_EDGES[0]
 
 
@@ -90,17 +91,19 @@ class Calibration:
 
     def __call__(self, evidence: np.ndarray, labeled: np.ndarray | None = None) -> np.ndarray:
         """Confidence ``(S,)`` of segments with ``evidence`` ``(S, 4)``; ``labeled`` ``(S,)`` bool
-        marks those given a marker's label (not null): such a segment shorter than the first
-        length band is never "sure" (see :data:`SHORT_LABEL`)."""
+        marks those given a marker's label (not null): such a segment shorter than
+        :data:`SHORT_LABEL` frames is never "sure"."""
         raw = _score(evidence, self.weights)
         band = np.searchsorted(LENGTH_EDGES, evidence[:, 3], side="right")
-        can_be_sure = np.ones(len(raw), dtype=bool) if labeled is None else ~(np.asarray(labeled) & (band == 0))
+        short_label = np.zeros(len(raw), dtype=bool)
+        if labeled is not None:
+            short_label = np.asarray(labeled) & (evidence[:, 3] < SHORT_LABEL)
         out = np.empty(len(raw), dtype=np.float32)
         for b in range(len(LENGTH_EDGES) + 1):
             sel = band == b
             if sel.any():
                 y = np.interp(raw[sel], self.x[b], self.y[b])
-                sure = (raw[sel] >= self.sure[b]) & can_be_sure[sel]
+                sure = (raw[sel] >= self.sure[b]) & ~short_label[sel]
                 out[sel] = np.where(sure, np.maximum(y, SURE), np.minimum(y, SURE - 1e-3))
         return out
 
