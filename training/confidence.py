@@ -63,8 +63,9 @@ def validation_takes(layout, takes: int, frames: int) -> list:
 
 
 def segment_outcomes(labeling, take, truth) -> np.ndarray:
-    """``(S, 5)``: the evidence of every segment (4 columns), then whether it was entirely right."""
-    return np.column_stack([labeling.evidence, segments_right(labeling, truth, take.valid)])
+    """``(S, 6)``: the evidence of every segment (4 columns), whether it was entirely right, and
+    whether it was given a marker's label (not null)."""
+    return np.column_stack([labeling.evidence, segments_right(labeling, truth, take.valid), labeling.label >= 0])
 
 
 def fit_null_prior(data: list, layout, method: str) -> tuple[float, dict]:
@@ -122,13 +123,13 @@ def main(argv: list[str] | None = None) -> int:
                 seg.append(segment_outcomes(labeling, take, truth))
             seg = np.concatenate(seg)
             source = f"{len(data)} synthetic takes x {args.frames} frames, seeds {SEED0}+"
-            evidence, right = seg[:, :-1], seg[:, -1].astype(bool)
+            evidence, right, labeled = seg[:, :4], seg[:, 4].astype(bool), seg[:, 5].astype(bool)
             cal = fit_calibration(evidence, right, source)
             table[calibration_key(method, temporal, name)] = cal.as_dict()
             if tried:
                 table[calibration_key(method, temporal, name)].update(
                     null_prior=[prior, 0.0], null_prior_tried={str(k): v for k, v in tried.items()})
-            hi = cal(evidence) >= 0.95
+            hi = cal(evidence, labeled=labeled) >= 0.95  # as the pipeline calls it
             print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
                   f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "
                   "right", file=sys.stderr)
