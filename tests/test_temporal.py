@@ -329,6 +329,24 @@ def test_a_short_marker_label_is_never_sure_but_a_short_null_can_be():
     assert (conf[short & ~labeled] >= 0.95).all() and (conf[~short] >= 0.95).all()
 
 
+def test_short_marker_labels_do_not_count_against_the_sure_threshold():
+    # 3-frame segments: 2,000 nulls, all right, and 40 marker labels, all wrong, with the same top
+    # evidence (a ghost left out and a ghost taken for a marker look alike); then 2,000 weaker ones.
+    # Counted, the 40 hold the top group below 99.9 %. They are never sure anyway, so told which
+    # segments are labels, the fit makes the nulls sure.
+    n, bad = 2000, 40
+    p = np.concatenate([np.full(n + bad, 0.999), np.linspace(0.1, 0.9, 2000)])
+    evidence = np.column_stack([p, np.ones(len(p)), np.full(len(p), 8.0), np.full(len(p), 3.0)])
+    correct = np.concatenate([np.ones(n, bool), np.zeros(bad, bool), np.arange(2000) % 2 == 0])
+    labeled = np.zeros(len(p), dtype=bool)
+    labeled[n:n + bad] = True
+    blind = fit_calibration(evidence, correct)
+    told = fit_calibration(evidence, correct, labeled)
+    assert not (blind(evidence, labeled) >= 0.95).any()
+    sure = told(evidence, labeled) >= 0.95
+    assert sure[:n].all() and not sure[n:].any()
+
+
 def test_empty_and_ghost_flooded_takes(han19, synth_take):
     empty = Take(positions=np.full((10, 3, 3), np.nan, dtype=np.float32), names=["*0", "*1", "*2"], rate=100.0,
                  source="empty.c3d")

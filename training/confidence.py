@@ -36,6 +36,10 @@ COMBOS = [("set", "vote"), ("set", "none"), ("set", "viterbi"), ("perm", "vote")
           ("cnn", "none"), ("gmm", "viterbi"), ("gmm", "vote"), ("gmm", "none"), ("nearest", "none"),
           ("nearest", "vote")]
 FIT_FRAMES = 400
+#: The shortest calibration take, frames. Calibrated on 2,000-frame takes alone, the fit leaned on
+#: segment length, and on han2018's short real takes (190 frames on average) 7 % of segments were
+#: sure, against 35 % with lengths from 150 to 2,000 frames (both 99.96-100 % right).
+MIN_FRAMES = 150
 #: Method/temporal pairs whose vote gets a fitted null prior (the default pipeline).
 PRIOR_COMBOS = {("set", "vote")}
 #: Per-segment null priors tried, nats (see ``core.temporal.voting.vote``). Per-sample priors
@@ -49,10 +53,14 @@ PRIOR_TOLERANCE = 0.01
 
 def validation_takes(layout, takes: int, frames: int) -> list:
     """Synthetic (take, truth, true markers) triples, the first :data:`FIT_FRAMES` frames cut off
-    the take: half as the generator makes them, half broken up harder."""
+    the take: half as the generator makes them, half broken up harder. Take lengths are drawn
+    log-uniformly from :data:`MIN_FRAMES` to ``frames``: a segment's length, one of the evidence
+    columns, is bounded by its take's, and users label short takes as well as long ones."""
     out = []
-    for i in range(takes):
-        synth = synthesize(layout, frames + FIT_FRAMES, seed=SEED0 + i)
+    lengths = np.exp(np.random.default_rng(SEED0).uniform(np.log(MIN_FRAMES), np.log(max(frames, MIN_FRAMES)),
+                                                           size=takes)).astype(int)
+    for i, n in enumerate(lengths):
+        synth = synthesize(layout, int(n) + FIT_FRAMES, seed=SEED0 + i)
         if i % 2 == 0:
             take, truth = synth.take, synth.labels
         else:
@@ -93,8 +101,9 @@ def shipped_layouts() -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.confidence", description=__doc__.splitlines()[0])
-    ap.add_argument("--takes", type=int, default=32, help="synthetic takes per layout (default 32)")
-    ap.add_argument("--frames", type=int, default=2000, help="frames labeled per take (default 2000)")
+    ap.add_argument("--takes", type=int, default=256, help="synthetic takes per layout (default 256)")
+    ap.add_argument("--frames", type=int, default=2000,
+                    help="frames labeled in the longest take (default 2000; the shortest has MIN_FRAMES)")
     ap.add_argument("--only", nargs="*", help="method/temporal pairs (default: all of COMBOS)")
     ap.add_argument("--out", default=CALIBRATIONS)
     args = ap.parse_args(argv)
@@ -122,9 +131,9 @@ def main(argv: list[str] | None = None) -> int:
                 labeling = label_take(take, layout, method=method, temporal=temporal, calibrate=False, **options)
                 seg.append(segment_outcomes(labeling, take, truth))
             seg = np.concatenate(seg)
-            source = f"{len(data)} synthetic takes x {args.frames} frames, seeds {SEED0}+"
+            source = f"{len(data)} synthetic takes of {MIN_FRAMES}-{args.frames} frames, seeds {SEED0}+"
             evidence, right, labeled = seg[:, :4], seg[:, 4].astype(bool), seg[:, 5].astype(bool)
-            cal = fit_calibration(evidence, right, source)
+            cal = fit_calibration(evidence, right, labeled, source)
             table[calibration_key(method, temporal, name)] = cal.as_dict()
             if tried:
                 table[calibration_key(method, temporal, name)].update(

@@ -33,7 +33,7 @@ SURE, SURE_ACCURACY = 0.95, 0.999
 #: whatever its evidence: every sure-but-wrong segment seen on the han2018 raw takes (8 over two
 #: model versions) was a 2-6-frame ghost with perfect per-frame evidence, sitting where a hidden
 #: marker would be. Such labels are few and quick to check. Null decisions of short ghosts keep
-#: their calibration.
+#: their calibration, and the sure threshold is fitted on the segments that may be sure.
 SHORT_LABEL = LENGTH_EDGES[0]
 
 
@@ -139,12 +139,18 @@ def _fit_logistic(x: np.ndarray, y: np.ndarray, l2: float = 1e-3) -> np.ndarray:
     return minimize(loss, np.zeros(x.shape[1]), jac=True, method="L-BFGS-B", bounds=bounds).x
 
 
-def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "") -> Calibration:
-    """Fit the maps from validation segments: their evidence ``(n, 4)`` (see :func:`segment_evidence`)
-    and whether each segment was entirely right ``(n,)``."""
+def fit_calibration(evidence: np.ndarray, correct: np.ndarray, labeled: np.ndarray | None = None,
+                    source: str = "") -> Calibration:
+    """Fit the maps from validation segments: their evidence ``(n, 4)`` (see :func:`segment_evidence`),
+    whether each segment was entirely right ``(n,)`` and, optionally, whether it was given a
+    marker's label ``(n,)``: short marker labels are never sure (:data:`SHORT_LABEL`), so the sure
+    threshold is set on the other segments alone."""
     from scipy.optimize import isotonic_regression
 
     correct = np.asarray(correct, dtype=bool)
+    eligible = np.ones(len(correct), dtype=bool)
+    if labeled is not None:
+        eligible = ~(np.asarray(labeled, dtype=bool) & (np.asarray(evidence)[:, 3] < SHORT_LABEL))
     # Rounded as stored: the sure threshold below must hold for the weights that are shipped.
     weights = [round(float(w), 6) for w in _fit_logistic(_features(evidence), correct.astype(float))]
     raw = _score(evidence, weights)
@@ -176,13 +182,13 @@ def fit_calibration(evidence: np.ndarray, correct: np.ndarray, source: str = "")
         sure.append(0.0)
     # The lowest score from which segments were right often enough (one-sided bound), over all
     # bands together: the score includes length, and the promise is about all segments.
-    order = np.argsort(-raw, kind="stable")
-    right = np.cumsum(correct[order])
-    ranked = raw[order]
+    order = np.argsort(-raw[eligible], kind="stable")
+    right = np.cumsum(correct[eligible][order])
+    ranked = raw[eligible][order]
     # Only at the last of equal scores: every segment scored at the threshold is sure, so all of
     # them must be in the count (saturated scores come in large ties).
     group_end = np.append(ranked[1:] < ranked[:-1], True)
-    ok = np.flatnonzero(group_end & (_wilson_lower(right, np.arange(1, len(raw) + 1), z=1.0) >= SURE_ACCURACY))
+    ok = np.flatnonzero(group_end & (_wilson_lower(right, np.arange(1, len(ranked) + 1), z=1.0) >= SURE_ACCURACY))
     tau = float(ranked[ok[-1]]) if len(ok) else 2.0
     sure = [2.0 if s == 2.0 else tau for s in sure]
     return Calibration(weights, xs, ys, sure, int(len(raw)), source)
