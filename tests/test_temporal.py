@@ -347,6 +347,17 @@ def test_short_marker_labels_do_not_count_against_the_sure_threshold():
     assert sure[:n].all() and not sure[n:].any()
 
 
+def test_calibration_takes_vary_in_length_and_keep_their_truth():
+    from training.confidence import FIT_FRAMES, MIN_FRAMES, validation_takes
+
+    takes = validation_takes(load_layout("glove13"), 6, 500)
+    lengths = [take.n_frames for take, _, _ in takes]
+    assert all(MIN_FRAMES <= n <= 500 for n in lengths) and len(set(lengths)) == 6
+    assert lengths == [take.n_frames for take, _, _ in validation_takes(load_layout("glove13"), 6, 500)]  # seeded
+    for take, truth, markers in takes:
+        assert truth.shape == take.positions.shape[:2] and len(markers) == take.n_frames + FIT_FRAMES
+
+
 def test_empty_and_ghost_flooded_takes(han19, synth_take):
     empty = Take(positions=np.full((10, 3, 3), np.nan, dtype=np.float32), names=["*0", "*1", "*2"], rate=100.0,
                  source="empty.c3d")
