@@ -31,7 +31,7 @@ from .temporal.voting import (
     split_segments,
     vote,
 )
-from .tracklets import find_tracklets
+from .tracklets import find_crossings, find_tracklets
 
 #: Temporal modes: ``vote`` (trajectory voting with exclusivity, the default), ``viterbi``
 #: (Alexanderson's N-best + Kalman), ``none`` (per-frame labels as they come).
@@ -126,7 +126,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         start: ``(M, 3)`` labeled first frame for ``nearest`` (default: ``set``'s labels of it).
         score: voting score, ``"likelihood"`` (ours) or ``"power"`` (Ghorbani's, with ``p``, ``q``).
         n_best: hypotheses per frame for ``viterbi``.
-        split_swaps: split a tracklet where its evidence flips for good (``vote`` only).
+        split_swaps: split a tracklet where its evidence flips for good, and where two tracklets
+            that pass close may have traded markers (:func:`.tracklets.find_crossings`); ``vote`` only.
         labeler: a ready labeler to use instead of building one from ``method`` (e.g. a ``gmm``
             fitted once for a performer and used for all their takes).
         calibrate: map raw segment confidences through the shipped calibration, where one exists.
@@ -178,6 +179,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         cuts.setdefault(c.slot, []).extend([c.start, c.stop])
     for slot, frame in splits:
         cuts.setdefault(int(slot), []).append(int(frame))
+    if split_swaps and temporal == "vote":
+        for slot, frames in find_crossings(take).items():
+            cuts.setdefault(slot, []).extend(frames)
     segments = split_segments(Segments(tracklets.slot.astype(np.int64), tracklets.start, tracklets.stop), cuts)
     locked_at = np.full(valid.shape, EMPTY, dtype=np.int16)  # the locked label of each sample
     for c in constraints:

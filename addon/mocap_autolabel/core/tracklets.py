@@ -82,3 +82,60 @@ def find_tracklets(take: Take, max_speed: float | None = None) -> Tracklets:
     slot, start = np.nonzero(valid & (~before | jump))
     _, last = np.nonzero(valid & ~after)
     return Tracklets(slot=slot.astype(np.int32), start=start.astype(np.int64), stop=last.astype(np.int64) + 1)
+
+
+def find_crossings(take: Take, near: float = 0.03, gain: float = 0.003, max_points: int = 64) -> dict[int, list[int]]:
+    """Frames where two trajectories that pass close may have traded markers without a gap.
+
+    A capture system's tracker can swap the identities of two markers that come within a few
+    millimetres of each other. At such a frame each trajectory continues where the other one
+    was heading: predicted at constant velocity from the two frames before, the crossed
+    continuation fits better than the straight one. A pair is a candidate when its points were
+    within ``near`` of each other the frame before and crossing them lowers the summed
+    prediction error by more than ``gain``. Both trajectories are cut there and their parts
+    decided apart; a cut where nothing was swapped only splits one decision in two.
+
+    Args:
+        take: the take (metres).
+        near: metres between the two points at the frame before.
+        gain: metres of summed prediction error that crossing must save. 3 mm labeled synthetic
+            validation takes best of 3, 5, 8 and 12 mm, for han19 and glove13 alike.
+        max_points: frames with more slots than this valid in three frames running are skipped
+            (a flood of ghosts: the pairs grow with the square).
+
+    Returns:
+        ``{slot: [frames where a new part begins]}``.
+    """
+    cuts: dict[int, list[int]] = {}
+    if take.n_frames < 3 or take.n_points < 2:
+        return cuts
+    ok = take.valid[2:] & take.valid[1:-1] & take.valid[:-2]  # (F - 2, S): row i is frame i + 2
+    count = ok.sum(axis=1)
+    frames = np.flatnonzero((count >= 2) & (count <= max_points)) + 2
+    if not len(frames):
+        return cuts
+    k = int(count[frames - 2].max())
+    step = max(1, 4_000_000 // (k * k))
+    upper = np.triu(np.ones((k, k), dtype=bool), 1)
+    for lo in range(0, len(frames), step):
+        f = frames[lo:lo + step]
+        # Pack the slots valid in all three frames to the left, the same order in each.
+        slots = np.argsort(~ok[f - 2], axis=1, kind="stable")[:, :k]
+        live = np.take_along_axis(ok[f - 2], slots, axis=1)
+        now, before, earlier = (np.take_along_axis(take.positions[f - d], slots[..., None], axis=1).astype(np.float64)
+                                for d in (0, 1, 2))
+        sq = (before * before).sum(axis=2)
+        gap2 = sq[:, :, None] + sq[:, None, :] - 2.0 * before @ before.transpose(0, 2, 1)
+        row, i, j = np.nonzero(live[:, :, None] & live[:, None, :] & upper & (gap2 < near * near))
+        if not len(row):
+            continue
+        # Constant-velocity predictions of both points of each close pair, and where they are now.
+        pred_i, pred_j = (2.0 * before[row, s] - earlier[row, s] for s in (i, j))
+        now_i, now_j = now[row, i], now[row, j]
+        straight = np.linalg.norm(pred_i - now_i, axis=1) + np.linalg.norm(pred_j - now_j, axis=1)
+        crossed = np.linalg.norm(pred_i - now_j, axis=1) + np.linalg.norm(pred_j - now_i, axis=1)
+        cross = straight - crossed > gain
+        for fr, a, b in zip(f[row[cross]], slots[row[cross], i[cross]], slots[row[cross], j[cross]]):
+            cuts.setdefault(int(a), []).append(int(fr))
+            cuts.setdefault(int(b), []).append(int(fr))
+    return cuts
