@@ -23,6 +23,7 @@ from mocap_autolabel.core.temporal.voting import (
     find_swaps,
     segment_of,
     split_segments,
+    tracklet_share,
     vote,
 )
 from mocap_autolabel.core.tracklets import find_crossings
@@ -252,6 +253,22 @@ def test_crossing_trajectories_that_trade_markers_are_cut_where_they_trade():
     traded[31:, [0, 1]] = traded[31:, [1, 0]]  # the tracker swaps them after the closest frame
     cuts = find_crossings(Take(positions=traded.astype(np.float32), names=["*0", "*1", "*2"], rate=120.0))
     assert cuts == {0: [31], 1: [31]}
+
+
+def test_pieces_of_one_tracklet_share_its_null_prior():
+    segs = Segments(np.array([0, 0, 0, 1]), np.array([0, 10, 45, 0]), np.array([10, 40, 50, 5]))
+    np.testing.assert_allclose(tracklet_share(segs), [0.25, 0.75, 1.0, 1.0])  # a gap ends a tracklet
+    # A 10-frame piece cut from a 40-frame trajectory, 1 nat per frame for label 0 over null:
+    # paying the whole 12-nat prior it would go null; its share (3 nats) it beats.
+    frames = np.arange(40)
+    logp = np.tile(np.log(np.array([0.6, 0.05, 0.35])), (40, 1)).astype(np.float32)
+    logp[:30] = np.log(np.array([0.05, 0.9, 0.05]))  # the first 30 frames are label 1
+    samples = Samples(frame=frames, slot=np.zeros(40, dtype=np.int64), logp=logp,
+                      label=np.zeros(40, dtype=np.int64), confidence=np.ones(40))
+    whole = Segments(np.array([0, 0]), np.array([0, 30]), np.array([30, 40]))
+    locked = np.full((40, 1), EMPTY, dtype=np.int16)
+    _, labels, _, _ = vote(samples, whole, locked, split_swaps=False, null_prior=(12.0, 0.0))
+    assert list(labels) == [1, 0]
 
 
 def test_swap_inside_a_tracklet_is_split(han19):
