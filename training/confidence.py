@@ -42,7 +42,7 @@ FIT_FRAMES = 400
 MIN_FRAMES = 150
 #: Method/temporal pairs whose vote gets a fitted null prior (the default pipeline).
 PRIOR_COMBOS = {("set", "vote")}
-#: Per-segment null priors tried, nats (see ``core.temporal.voting.vote``). Per-sample priors
+#: Per-tracklet null priors tried, nats (see ``core.temporal.voting.vote``). Per-sample priors
 #: were tried too: they help synthetic takes and hurt real hands, whose hard frames (fists) give
 #: real markers margins of about a nat per frame.
 NULL_PRIORS = (0.0, 2.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
@@ -77,7 +77,7 @@ def segment_outcomes(labeling, take, truth) -> np.ndarray:
 
 
 def fit_null_prior(data: list, layout, method: str) -> tuple[float, dict]:
-    """The per-segment null prior for ``method`` + vote on validation takes, and the share of
+    """The per-tracklet null prior for ``method`` + vote on validation takes, and the share of
     correct instances (%) of every prior tried."""
     labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
     results = {}
@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
             prior, tried = 0.0, {}
             if (method, temporal) in PRIOR_COMBOS:
                 prior, tried = fit_null_prior(data, layout, method)
-                print(f"{name} {method}+{temporal}: null prior {prior} nats per segment; correct % by prior: {tried}",
+                print(f"{name} {method}+{temporal}: null prior {prior} nats per tracklet; correct % by prior: {tried}",
                       file=sys.stderr)
             for take, truth, markers in data:
                 options = {"null_prior": (prior, 0.0)}
