@@ -98,8 +98,8 @@ def find_crossings(take: Take, near: float = 0.03, gain: float = 0.003, max_poin
     Args:
         take: the take (metres).
         near: metres between the two points at the frame before.
-        gain: metres of summed prediction error that crossing must save. 3 mm labeled synthetic
-            validation takes best of 3, 5, 8 and 12 mm, for han19 and glove13 alike.
+        gain: metres of summed prediction error that crossing must save. Of 3, 5, 8 and 12 mm,
+            3 mm labeled synthetic validation takes best, for han19 and glove13 alike.
         max_points: frames with more slots than this valid in three frames running are skipped
             (a flood of ghosts: the pairs grow with the square).
 

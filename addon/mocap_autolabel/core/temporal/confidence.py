@@ -77,6 +77,14 @@ def _score(evidence: np.ndarray, weights) -> np.ndarray:
     return 1.0 / (1.0 + np.exp(-_features(evidence) @ np.asarray(weights)))
 
 
+def _short_labels(evidence: np.ndarray, labeled: np.ndarray | None) -> np.ndarray:
+    """bool ``(S,)``: segments given a marker's label for fewer than :data:`SHORT_LABEL` frames
+    (never "sure"); none when ``labeled`` is not known."""
+    if labeled is None:
+        return np.zeros(len(evidence), dtype=bool)
+    return np.asarray(labeled, dtype=bool) & (np.asarray(evidence)[:, 3] < SHORT_LABEL)
+
+
 @dataclass
 class Calibration:
     """Logistic weights over the evidence, then per length band a monotone map from that score
@@ -95,9 +103,7 @@ class Calibration:
         :data:`SHORT_LABEL` frames is never "sure"."""
         raw = _score(evidence, self.weights)
         band = np.searchsorted(LENGTH_EDGES, evidence[:, 3], side="right")
-        short_label = np.zeros(len(raw), dtype=bool)
-        if labeled is not None:
-            short_label = np.asarray(labeled) & (evidence[:, 3] < SHORT_LABEL)
+        short_label = _short_labels(evidence, labeled)
         out = np.empty(len(raw), dtype=np.float32)
         for b in range(len(LENGTH_EDGES) + 1):
             sel = band == b
@@ -148,9 +154,7 @@ def fit_calibration(evidence: np.ndarray, correct: np.ndarray, labeled: np.ndarr
     from scipy.optimize import isotonic_regression
 
     correct = np.asarray(correct, dtype=bool)
-    eligible = np.ones(len(correct), dtype=bool)
-    if labeled is not None:
-        eligible = ~(np.asarray(labeled, dtype=bool) & (np.asarray(evidence)[:, 3] < SHORT_LABEL))
+    eligible = ~_short_labels(evidence, labeled)
     # Rounded as stored: the sure threshold below must hold for the weights that are shipped.
     weights = [round(float(w), 6) for w in _fit_logistic(_features(evidence), correct.astype(float))]
     raw = _score(evidence, weights)
