@@ -41,7 +41,8 @@ class Recipe:
     compile: bool = True  # torch.compile the training steps of long runs (a quarter faster on CPU)
 
 
-def _progress(done: int, total: int, started: float, loss: float, stream=sys.stderr) -> None:
+def _progress(done: int, total: int, started: float, loss: float, stream=None) -> None:
+    stream = stream or sys.stderr  # looked up per call: a default bound at import misses a redirected stderr
     elapsed = time.perf_counter() - started
     eta = elapsed / max(done, 1) * (total - done)
     width = 30
