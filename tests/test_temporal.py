@@ -14,7 +14,7 @@ from mocap_autolabel.core.metrics import segments_right
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
-from mocap_autolabel.core.temporal.confidence import fit_calibration, load_null_prior
+from mocap_autolabel.core.temporal.confidence import fit_calibration, load_null_prior, load_switch_cost
 from mocap_autolabel.core.temporal.viterbi import viterbi_labels
 from mocap_autolabel.core.temporal.voting import (
     Samples,
@@ -36,9 +36,10 @@ def _segments(starts, stops, slots=None) -> Segments:
                     np.asarray(stops, dtype=np.int64))
 
 
-def _brute_force(weights, segs, locked):
+def _brute_force(weights, segs, locked, switch=None):
     n, m1 = weights.shape
     m = m1 - 1
+    switch = np.zeros(n) if switch is None else switch
     best = -np.inf
     for combo in itertools.product(range(m1), repeat=n):
         if any((combo[s] if combo[s] < m else NULL) != lab for s, lab in locked.items()):
@@ -50,7 +51,8 @@ def _brute_force(weights, segs, locked):
                 if overlap and combo[a] == combo[b] and combo[a] < m:
                     ok = False
         if ok:
-            best = max(best, sum(weights[s, combo[s]] for s in range(n)))
+            paid = sum(switch[s] for s in range(1, n) if combo[s] != combo[s - 1])
+            best = max(best, sum(weights[s, combo[s]] for s in range(n)) - paid)
     return best
 
 
@@ -73,6 +75,49 @@ def test_exclusive_assignment_is_optimal(seed):
         for b in range(a + 1, n):
             if segs.start[a] < segs.stop[b] and segs.start[b] < segs.stop[a] and labels[a] >= 0:
                 assert labels[a] != labels[b]
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_exclusive_assignment_with_paid_switches_is_optimal(seed):
+    """Pieces of one trajectory pay to change label between them; the assignment stays optimal
+    and exclusive (checked against brute force)."""
+    rng = np.random.default_rng(100 + seed)
+    m, slots, starts, stops = 3, [], [], []
+    for slot in range(3):
+        edges = np.cumsum(np.concatenate([[rng.integers(0, 6)], rng.integers(2, 8, rng.integers(1, 4))]))
+        slots += [slot] * (len(edges) - 1)
+        starts += edges[:-1].tolist()
+        stops += edges[1:].tolist()
+    segs = _segments(starts, stops, slots)
+    n = len(segs)
+    weights = rng.normal(size=(n, m + 1)) * 5
+    weights[:, :m] += 3.0
+    joined = np.r_[False, (segs.slot[1:] == segs.slot[:-1]) & (segs.start[1:] == segs.stop[:-1])]
+    switch = np.where(joined, rng.uniform(0.5, 12.0, n), 0.0)
+    locked = {n - 1: int(rng.integers(-1, m))} if seed % 3 == 0 else {}
+    labels = exclusive_assignment(weights, segs, locked, switch=switch)
+    col = np.where(labels == NULL, m, labels)
+    paid = sum(switch[s] for s in range(1, n) if col[s] != col[s - 1])
+    assert weights[np.arange(n), col].sum() - paid == pytest.approx(_brute_force(weights, segs, locked, switch))
+    for s, lab in locked.items():
+        assert labels[s] == lab
+    for a in range(n):
+        for b in range(a + 1, n):
+            if segs.start[a] < segs.stop[b] and segs.start[b] < segs.stop[a] and labels[a] >= 0:
+                assert labels[a] != labels[b]
+
+
+def test_a_trajectory_changes_label_only_where_its_evidence_pays_for_the_switch():
+    """Three pieces of one trajectory: a middle stretch that reads as label 1 by 30 nats stays
+    label 0 when a switch costs 20 nats (two switches: 40), and changes when it costs 10. A last
+    piece that reads as label 2 by 50 nats changes (a real swap), and only there."""
+    segs = _segments([0, 40, 80], [40, 80, 120], slots=[0, 0, 0])
+    weights = np.array([[60.0, 0.0, 0.0, 0.0], [0.0, 30.0, 0.0, 0.0], [60.0, 0.0, 0.0, 0.0]])
+    for cost, expect in ((20.0, [0, 0, 0]), (10.0, [0, 1, 0])):
+        assert exclusive_assignment(weights, segs, switch=np.array([0.0, cost, cost])).tolist() == expect
+    weights[1:] = [[5.0, 15.0, 0.0, 0.0], [0.0, 0.0, 50.0, 0.0]]
+    assert exclusive_assignment(weights, segs, switch=np.array([0.0, 20.0, 20.0])).tolist() == [0, 0, 2]
+    assert exclusive_assignment(weights, segs).tolist() == [0, 1, 2]  # no cost: each piece alone
 
 
 def test_a_segment_whose_best_labels_are_taken_takes_its_next_free_one():
@@ -105,15 +150,19 @@ def test_null_prior_is_paid_once_per_segment():
     assert labels.tolist() == [NULL, 0]
 
 
-def test_label_take_uses_the_shipped_null_prior_unless_given_one():
+def test_label_take_uses_the_shipped_null_prior_and_switch_cost_unless_given_them():
     layout = load_layout("glove13")
     s = synthesize(layout, 240, seed=4)
-    shipped = load_null_prior("set", "vote", "glove13")
-    assert shipped[0] > 0.0  # fitted by training.confidence for the default pipeline
-    assert label_take(s.take, layout).info["null_prior"] == list(shipped)
-    assert label_take(s.take, layout, null_prior=(0.0, 0.0)).info["null_prior"] == [0.0, 0.0]
-    assert label_take(s.take, layout, score="power").info["null_prior"] == [0.0, 0.0]  # fitted for likelihood only
+    shipped, switch = load_null_prior("set", "vote", "glove13"), load_switch_cost("set", "vote", "glove13")
+    assert shipped[0] > 0.0 and switch[1] > 0.0  # fitted by training.confidence for the default pipeline
+    info = label_take(s.take, layout).info
+    assert info["null_prior"] == list(shipped) and info["switch_cost"] == list(switch)
+    info = label_take(s.take, layout, null_prior=(0.0, 0.0), switch_cost=(0.0, 0.0)).info
+    assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0]
+    info = label_take(s.take, layout, score="power").info  # fitted for the likelihood score only
+    assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0]
     assert load_null_prior("set", "vote", "no_such_layout") == (0.0, 0.0)
+    assert load_switch_cost("set", "vote", "no_such_layout") == (0.0, 0.0)
 
 
 def test_exclusivity_is_an_assignment_not_greedy():

@@ -4,8 +4,8 @@ For each shipped layout and each method x temporal mode in :data:`COMBOS`, label
 takes (the generator's realistic takes, and clean tracks broken up by ``corrupt_take``), record
 each segment's raw confidence and whether it was entirely right, and fit the monotone,
 conservative map of ``core/temporal/confidence.py``. For the default pipeline (:data:`PRIOR_COMBOS`)
-it first fits the vote's null prior (:func:`fit_null_prior`) and calibrates the decisions made
-with it. ``gmm`` is fitted on the first :data:`FIT_FRAMES` true frames of each take and ``nearest``
+it first fits the vote's switch cost and null prior (:func:`fit_vote_setting`) and calibrates
+the decisions made with them. ``gmm`` is fitted on the first :data:`FIT_FRAMES` true frames of each take and ``nearest``
 starts from the true first frame; only the frames after those are labeled. Writes
 ``addon/mocap_autolabel/models/confidence.json``. Needs no PyTorch; rerun after retraining a model.
 """
@@ -28,7 +28,12 @@ from mocap_autolabel.core.metrics import score_labeling, segments_right
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import corrupt_take, synthesize
 from mocap_autolabel.core.take import Take
-from mocap_autolabel.core.temporal.confidence import CALIBRATIONS, calibration_key, fit_calibration
+from mocap_autolabel.core.temporal.confidence import (
+    CALIBRATIONS,
+    calibration_key,
+    fit_calibration,
+    load_null_prior,
+)
 
 #: Seeds of the calibration takes: apart from the benchmarks' and the tests' seeds.
 SEED0 = 50_000
@@ -40,13 +45,16 @@ FIT_FRAMES = 400
 #: segment length, and on han2018's short real takes (190 frames on average) 7 % of segments were
 #: sure, against 35 % with lengths from 150 to 2,000 frames (both 99.96-100 % right).
 MIN_FRAMES = 150
-#: Method/temporal pairs whose vote gets a fitted null prior (the default pipeline).
+#: Method/temporal pairs whose vote gets a fitted switch cost and null prior (the default pipeline).
 PRIOR_COMBOS = {("set", "vote")}
 #: Per-tracklet null priors tried, nats (see ``core.temporal.voting.vote``). Per-sample priors
 #: were tried too: they help synthetic takes and hurt real hands, whose hard frames (fists) give
 #: real markers margins of about a nat per frame.
 NULL_PRIORS = (0.0, 2.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
-#: The smallest prior within this many points of the best share of correct instances wins: past
+#: Switch costs tried at the vote's own cuts (evidence flips, clashes), nats; crossings stay free
+#: (they are where a capture system's swaps are; a cost there changed nothing on synthetic takes).
+SWITCH_COSTS = (0.0, 10.0, 20.0, 40.0, 60.0, 100.0, 200.0, 300.0, 500.0)
+#: The smallest value within this many points of the best share of correct instances wins: past
 #: the knee the gain is flat, while a larger prior drops more real markers seen for a frame or two.
 PRIOR_TOLERANCE = 0.01
 
@@ -76,21 +84,24 @@ def segment_outcomes(labeling, take, truth) -> np.ndarray:
     return np.column_stack([labeling.evidence, segments_right(labeling, truth, take.valid), labeling.label >= 0])
 
 
-def fit_null_prior(data: list, layout, method: str) -> tuple[float, dict]:
-    """The per-tracklet null prior for ``method`` + vote on validation takes, and the share of
-    correct instances (%) of every prior tried."""
+def fit_vote_setting(data: list, layout, method: str, option: str, values, **fixed) -> tuple[float, dict]:
+    """Fit one setting of ``method`` + vote on validation takes: ``option`` is ``"null_prior"``
+    (per tracklet) or ``"switch_cost"`` (at the vote's own cuts), tried at ``values``; ``fixed``
+    holds the other settings. Returns the smallest value within :data:`PRIOR_TOLERANCE` of the
+    best share of correct instances, and that share (%) for every value tried."""
     labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
     results = {}
-    for prior in NULL_PRIORS:
+    for value in values:
+        setting = (value, 0.0) if option == "null_prior" else (0.0, value)
         correct = instances = 0
         for (take, truth, _), labeler in zip(data, labelers):
             labeling = label_take(take, layout, method=method, temporal="vote", labeler=labeler, calibrate=False,
-                                  null_prior=(prior, 0.0))
+                                  **fixed, **{option: setting})
             s = score_labeling(labeling.per_sample(), truth, take.valid, len(layout))
             correct, instances = correct + s.correct, instances + s.instances
-        results[prior] = round(100.0 * correct / instances, 4)
+        results[value] = round(100.0 * correct / instances, 4)
     best = max(results.values())
-    return min(p for p, v in results.items() if v >= best - PRIOR_TOLERANCE), results
+    return min(v for v, share in results.items() if share >= best - PRIOR_TOLERANCE), results
 
 
 def shipped_layouts() -> list[str]:
@@ -117,13 +128,18 @@ def main(argv: list[str] | None = None) -> int:
         combos = [tuple(c.split("/")) for c in args.only] if args.only else COMBOS
         for method, temporal in combos:
             seg = []
-            prior, tried = 0.0, {}
+            prior, switch, tried = 0.0, 0.0, {}
             if (method, temporal) in PRIOR_COMBOS:
-                prior, tried = fit_null_prior(data, layout, method)
-                print(f"{name} {method}+{temporal}: null prior {prior} nats per tracklet; correct % by prior: {tried}",
-                      file=sys.stderr)
+                # The switch cost at the shipped prior, then the prior at that cost.
+                shipped = load_null_prior(method, temporal, name, args.out)
+                switch, tried["switch_cost"] = fit_vote_setting(data, layout, method, "switch_cost", SWITCH_COSTS,
+                                                                null_prior=shipped)
+                prior, tried["null_prior"] = fit_vote_setting(data, layout, method, "null_prior", NULL_PRIORS,
+                                                              switch_cost=(0.0, switch))
+                print(f"{name} {method}+{temporal}: switch cost {switch} nats, null prior {prior} nats per tracklet; "
+                      f"correct % tried: {tried}", file=sys.stderr)
             for take, truth, markers in data:
-                options = {"null_prior": (prior, 0.0)}
+                options = {"null_prior": (prior, 0.0), "switch_cost": (0.0, switch)}
                 if method == "gmm":
                     options["labeler"] = GmmLabeler(layout).fit(markers[:FIT_FRAMES])
                 if method == "nearest":
@@ -137,7 +153,8 @@ def main(argv: list[str] | None = None) -> int:
             table[calibration_key(method, temporal, name)] = cal.as_dict()
             if tried:
                 table[calibration_key(method, temporal, name)].update(
-                    null_prior=[prior, 0.0], null_prior_tried={str(k): v for k, v in tried.items()})
+                    null_prior=[prior, 0.0], null_prior_tried={str(k): v for k, v in tried["null_prior"].items()},
+                    switch_cost=[0.0, switch], switch_cost_tried={str(k): v for k, v in tried["switch_cost"].items()})
             hi = cal(evidence, labeled=labeled) >= 0.95  # as the pipeline calls it
             print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
                   f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "

@@ -22,7 +22,7 @@ from .labelers.assign import assign, row_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
 from .layout import Layout
 from .take import Take
-from .temporal.confidence import load_calibration, load_null_prior, segment_evidence
+from .temporal.confidence import load_calibration, load_null_prior, load_switch_cost, segment_evidence
 from .temporal.voting import (
     LOG_FLOOR,
     Samples,
@@ -111,7 +111,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                start: np.ndarray | None = None, score: str = "likelihood", p: float = 2.0, q: float = -0.5,
                n_best: int = 5, split_swaps: bool = True, labeler: Labeler | None = None, calibrate: bool = True,
                validate: bool = False, hand: Calibration | None = None, splits: Sequence[tuple[int, int]] = (),
-               null_prior: tuple[float, float] | None = None,
+               null_prior: tuple[float, float] | None = None, switch_cost: tuple[float, float] | None = None,
                progress: Callable[[str], None] | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
@@ -138,6 +138,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         null_prior: ``(per segment, per sample)`` nats a label must beat null by in the ``vote``
             with the ``likelihood`` score (:func:`.temporal.voting.vote`); default: the one fitted
             for this method and layout, shipped beside the confidence calibration.
+        switch_cost: ``(at a crossing, at any other cut)`` nats a trajectory pays to change label
+            between pieces the vote cut it into (``vote`` with ``likelihood`` only); default: the
+            one fitted for this method and layout, shipped beside the null prior.
         progress: called with a short message at each stage.
 
     Returns:
@@ -179,9 +182,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         cuts.setdefault(c.slot, []).extend([c.start, c.stop])
     for slot, frame in splits:
         cuts.setdefault(int(slot), []).append(int(frame))
-    if split_swaps and temporal == "vote":
-        for slot, frames in find_crossings(take).items():
-            cuts.setdefault(slot, []).extend(frames)
+    crossings = find_crossings(take) if split_swaps and temporal == "vote" else {}
     segments = split_segments(Segments(tracklets.slot.astype(np.int64), tracklets.start, tracklets.stop), cuts)
     locked_at = np.full(valid.shape, EMPTY, dtype=np.int16)  # the locked label of each sample
     for c in constraints:
@@ -192,10 +193,13 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if null_prior is None:
         null_prior = load_null_prior(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
     info["null_prior"] = [float(v) for v in null_prior]
+    if switch_cost is None:
+        switch_cost = load_switch_cost(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
+    info["switch_cost"] = [float(v) for v in switch_cost]
 
     def decide(scores: np.ndarray) -> Labeling:
         return _decide(scores, batch, take, layout, method, temporal, segments, locked_at, info, score, p, q,
-                       split_swaps, n_best, calibrate, null_prior)
+                       split_swaps, n_best, calibrate, null_prior, crossings, switch_cost)
 
     say(f"temporal step: {temporal}")
     t = time.perf_counter()
@@ -220,7 +224,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
 
 def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, method: str, temporal: str,
             segments: Segments, locked_at: np.ndarray, info: dict, score: str, p: float, q: float,
-            split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float]) -> Labeling:
+            split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float],
+            crossings: dict[int, list[int]], switch_cost: tuple[float, float]) -> Labeling:
     """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
@@ -231,7 +236,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
                       label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
     if temporal == "vote":
         segments, label, seg, facts = vote(samples, segments, locked_at, score, p, q, split_swaps,
-                                           null_prior=null_prior)
+                                           null_prior=null_prior, crossings=crossings, switch_cost=switch_cost)
         info.update(facts)
         first_locked = locked_at[segments.start, segments.slot]
         labeling = Labeling(names=layout.names, n_frames=take.n_frames, n_points=take.n_points,

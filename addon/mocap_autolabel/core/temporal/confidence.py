@@ -224,8 +224,18 @@ def load_calibration(method: str, temporal: str, layout: str, path: str = CALIBR
                        entry.get("source", ""))
 
 
+def _fitted_pair(method: str, temporal: str, layout: str, path: str, key: str) -> tuple[float, float]:
+    pair = (_entry(method, temporal, layout, path) or {}).get(key, (0.0, 0.0))
+    return float(pair[0]), float(pair[1])
+
+
 def load_null_prior(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> tuple[float, float]:
     """The shipped null prior ``(per segment, per sample)`` of a method, temporal mode and layout
     (see :func:`.voting.vote`); no prior where none was fitted."""
-    prior = (_entry(method, temporal, layout, path) or {}).get("null_prior", (0.0, 0.0))
-    return float(prior[0]), float(prior[1])
+    return _fitted_pair(method, temporal, layout, path, "null_prior")
+
+
+def load_switch_cost(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> tuple[float, float]:
+    """The shipped switch cost ``(at a crossing, at any other cut)`` of a method, temporal mode and
+    layout (see :func:`.voting.vote`); free switches where none was fitted."""
+    return _fitted_pair(method, temporal, layout, path, "switch_cost")

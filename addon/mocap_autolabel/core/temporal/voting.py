@@ -183,7 +183,8 @@ def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: s
 
 
 def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[int, int] | None = None,
-                         candidates: int | None = None, time_limit: float = 60.0) -> np.ndarray:
+                         candidates: int | None = None, time_limit: float = 60.0,
+                         switch: np.ndarray | None = None) -> np.ndarray:
     """The best label per segment (:data:`NULL` allowed) such that no two segments that overlap
     in time share a label. ``locked`` fixes some segments' labels.
 
@@ -195,6 +196,10 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
             one. Only labels that outweigh null are ever considered, so all of them stay few: a
             segment whose top labels are all taken by overlapping segments can still take its
             fifth (a thumb tip inside a fist that reads as the fingers it touches).
+        switch: float ``(S,)``: nats that segment ``s`` pays for a label other than segment
+            ``s - 1``'s, where the two are pieces of one trajectory (see :func:`switch_costs`); 0
+            where they are not. A piece may then take any label that some piece of its trajectory
+            finds useful.
 
     Returns:
         int64 ``(S,)`` labels.
@@ -204,25 +209,28 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     locked = locked or {}
     if n == 0:
         return np.zeros(0, dtype=np.int64)
+    switch = np.zeros(n) if switch is None else np.asarray(switch, dtype=np.float64)
+    chain = np.cumsum(switch <= 0) - 1  # pieces of one trajectory joined by a paid switch
     top = np.argsort(-weights[:, :m], axis=1)[:, :min(candidates or m, m)]
     # A label weighing no more than null is never worth taking: null scores higher and frees the
-    # label for others. Leaving such candidates out is exact and keeps the groups small.
-    useful = np.take_along_axis(weights, top, axis=1) > weights[:, m:m1]
-    pairs = {(s, int(label)) for s in range(n) for label, ok in zip(top[s], useful[s]) if ok}
-    pairs |= {(s, m) for s in range(n)}
-    pairs |= {(s, (m if label == NULL else label)) for s, label in locked.items()}
-    pairs = sorted(pairs)
-    var_seg = np.array([s for s, _ in pairs], dtype=np.int64)
-    var_lab = np.array([lab for _, lab in pairs], dtype=np.int64)
-    # Shortcut: if every segment's best label is already exclusive, that is optimal.
-    best = np.argmax(weights, axis=1)
+    # label for others. Leaving such candidates out is exact and keeps the groups small. A piece
+    # of a trajectory may also need a label that only its other pieces find useful.
+    useful = np.zeros((n, m), dtype=bool)
+    np.put_along_axis(useful, top, np.take_along_axis(weights, top, axis=1) > weights[:, m:m1], axis=1)
+    useful = np.logical_or.reduceat(useful, np.flatnonzero(np.diff(chain, prepend=-1)), axis=0)[chain]
+    allowed = np.concatenate([useful, np.ones((n, 1), dtype=bool)], axis=1)
     for s, label in locked.items():
-        best[s] = m if label == NULL else label
+        allowed[s] = False
+        allowed[s, m if label == NULL else label] = True
+    var_seg, var_lab = np.nonzero(allowed)
+    # Shortcut: if every trajectory's best labels are already exclusive, that is optimal.
+    best = _best_chains(np.where(allowed, weights, -np.inf), switch)
     if not _conflicts(best, segments, m):
         return np.where(best == m, NULL, best)
-    # Segments interact only through a shared candidate label over overlapping frames: solve just
-    # the groups of interacting segments that hold a clash; every other segment keeps its best.
-    group = _interacting_groups(var_seg, var_lab, segments, m, n)
+    # Segments interact only through a shared candidate label over overlapping frames, or as
+    # pieces of one trajectory: solve just the groups of interacting segments that hold a clash;
+    # every other segment keeps its best.
+    group = _interacting_groups(var_seg, var_lab, segments, m, n, chain)
     clashing = np.unique(group[_clashing(best, segments, m)])
     inside = np.isin(group, clashing)
     out = best.copy()
@@ -233,22 +241,62 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     sub_locked = {int(index[s]): lab for s, lab in locked.items() if inside[s]}
     sub_segments = Segments(segments.slot[sub], segments.start[sub], segments.stop[sub])
     out[sub] = _milp_assignment(weights[sub], sub_segments, index[var_seg[keep_var]], var_lab[keep_var],
-                                sub_locked, time_limit)
+                                sub_locked, time_limit, switch[sub])
     return np.where(out == m, NULL, out)
 
 
+def _best_chains(weights: np.ndarray, switch: np.ndarray) -> np.ndarray:
+    """The best labels ``(S,)`` (null as ``M``) without exclusivity: each trajectory's pieces by
+    dynamic programming over its chain (keep the label, or pay ``switch`` to change it)."""
+    n = len(weights)
+    linked = switch > 0
+    # Position of each segment within its chain; the chains are processed level by level.
+    start = np.flatnonzero(~linked)
+    pos = np.arange(n) - np.repeat(start, np.diff(np.append(start, n)))
+    score = weights.copy()
+    for level in range(1, int(pos.max(initial=0)) + 1):
+        s = np.flatnonzero(pos == level)
+        prev = score[s - 1]
+        score[s] += np.maximum(prev, prev.max(axis=1, keepdims=True) - switch[s, None])
+    label = np.argmax(score, axis=1)  # final for the last piece of each chain
+    for level in range(int(pos.max(initial=0)), 0, -1):
+        s = np.flatnonzero(pos == level)
+        prev = score[s - 1]
+        keep = prev[np.arange(len(s)), label[s]] >= prev.max(axis=1) - switch[s]
+        label[s - 1] = np.where(keep, label[s], np.argmax(prev, axis=1))
+    return label
+
+
 def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarray, var_lab: np.ndarray,
-                     locked: dict[int, int], time_limit: float) -> np.ndarray:
-    """The exclusive assignment as an integer programme over the candidate (segment, label) pairs;
-    returns labels with null as ``M``."""
+                     locked: dict[int, int], time_limit: float, switch: np.ndarray) -> np.ndarray:
+    """The exclusive assignment as an integer programme over the candidate (segment, label) pairs
+    (and one switch variable per paid link between pieces of a trajectory); returns labels with
+    null as ``M``."""
     n, m1 = weights.shape
     m = m1 - 1
-    n_vars = len(var_seg)
-    rows, cols, n_rows = [], [], 0
+    n_pairs = len(var_seg)
+    links = np.flatnonzero(switch > 0)  # segment s is linked to s - 1
+    n_vars = n_pairs + len(links)
+    rows, cols, vals = [var_seg], [np.arange(n_pairs)], [np.ones(n_pairs)]
     # Each segment takes exactly one label (null included).
-    rows.append(var_seg)
-    cols.append(np.arange(n_vars))
     n_rows = n
+    # A switch variable is at least z(s - 1, l) - z(s, l) for every label l of s - 1: it is 1
+    # wherever the two pieces differ.
+    var_of = {(int(a), int(b)): i for i, (a, b) in enumerate(zip(var_seg, var_lab))}
+    link_rows = []
+    for j, s in enumerate(links.tolist()):
+        for v in np.flatnonzero(var_seg == s - 1).tolist():
+            row = [(n_pairs + j, 1.0), (v, -1.0)]
+            w = var_of.get((s, int(var_lab[v])))
+            if w is not None:
+                row.append((w, 1.0))
+            link_rows.append(row)
+    for row in link_rows:
+        rows.append(np.full(len(row), n_rows))
+        cols.append(np.array([c for c, _ in row]))
+        vals.append(np.array([x for _, x in row]))
+        n_rows += 1
+    n_fixed = n_rows
     # Cliques: per label, the candidate segments alive at each candidate's start frame.
     for label in range(m):
         v = np.flatnonzero(var_lab == label)
@@ -266,30 +314,34 @@ def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarra
             members = v[alive[i]]
             rows.append(np.full(len(members), n_rows))
             cols.append(members)
+            vals.append(np.ones(len(members)))
             n_rows += 1
-    a = csr_matrix((np.ones(sum(len(r) for r in rows)), (np.concatenate(rows), np.concatenate(cols))),
-                   shape=(n_rows, n_vars))
+    a = csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_rows, n_vars))
     lb_rows = np.concatenate([np.ones(n), np.zeros(n_rows - n)])
-    ub_rows = np.ones(n_rows)
+    ub_rows = np.concatenate([np.ones(n), np.full(n_fixed - n, np.inf), np.ones(n_rows - n_fixed)])
     lower = np.zeros(n_vars)
     for s, label in locked.items():
         col = m if label == NULL else label
         lower[np.flatnonzero((var_seg == s) & (var_lab == col))] = 1.0
-    cost = -weights[var_seg, var_lab]
-    res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=np.ones(n_vars),
+    cost = np.concatenate([-weights[var_seg, var_lab], switch[links]])
+    integrality = np.concatenate([np.ones(n_pairs), np.zeros(len(links))])  # switches follow the labels
+    res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=integrality,
                bounds=Bounds(lower, np.ones(n_vars)), options={"time_limit": time_limit})
     if res.x is None:
         raise ValueError(f"no exclusive labeling exists: {res.message}")
-    chosen = res.x > 0.5
+    chosen = res.x[:n_pairs] > 0.5
     out = np.full(n, m, dtype=np.int64)
     out[var_seg[chosen]] = var_lab[chosen]
     return out
 
 
 def _interacting_groups(var_seg: np.ndarray, var_lab: np.ndarray, segments: Segments, m: int,
-                        n: int) -> np.ndarray:
-    """``(S,)`` group id: segments linked by a shared real candidate label over overlapping frames."""
+                        n: int, chain: np.ndarray) -> np.ndarray:
+    """``(S,)`` group id: segments linked by a shared real candidate label over overlapping frames,
+    or pieces of one trajectory (one ``chain``)."""
     parent = np.arange(n)
+    first = np.flatnonzero(np.diff(chain, prepend=-1))
+    parent[:] = first[chain]  # a chain's pieces start out in its first piece's group
 
     def find(x: int) -> int:
         while parent[x] != x:
@@ -335,16 +387,15 @@ def tracklet_share(segments: Segments) -> np.ndarray:
     long trajectory is no flickering ghost: it pays only its share of the per-tracklet null
     prior. Cut at crossings, a piece paying the whole prior went null in 261 more han2018 samples.
     """
-    joined = np.zeros(len(segments), dtype=bool)
-    joined[1:] = (segments.slot[1:] == segments.slot[:-1]) & (segments.start[1:] == segments.stop[:-1])
-    group = np.cumsum(~joined) - 1
+    group = np.cumsum(~_joined(segments)) - 1
     length = (segments.stop - segments.start).astype(np.float64)
     return length / np.bincount(group, weights=length)[group]
 
 
 def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str = "likelihood", p: float = 2.0,
          q: float = -0.5, split_swaps: bool = True, refine: int = 3,
-         null_prior: tuple[float, float] = (0.0, 0.0)) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
+         null_prior: tuple[float, float] = (0.0, 0.0), crossings: dict[int, list[int]] | None = None,
+         switch_cost: tuple[float, float] = (0.0, 0.0)) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
     """Trajectory voting end to end: split swaps, weigh, assign exclusively, refine where it clashed.
 
     A segment that lost its best label to an overlapping segment is cut at the edges of that
@@ -363,11 +414,24 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
             (cut at swaps, crossings or constraints) share its part in proportion to their
             length (:func:`tracklet_share`). Fitted per layout on synthetic validation takes by
             ``python -m training.confidence``.
+        crossings: ``{slot: [frames]}`` where two trajectories may have traded markers
+            (:func:`..tracklets.find_crossings`); cut when ``split_swaps``.
+        switch_cost: nats a trajectory pays to change its label where the vote cut it: at a
+            crossing, and at any other cut (where its evidence flipped, or where it clashed).
+            Per-frame evidence is shared by neighbouring frames, so a run of frames that read a
+            pinched fingertip as the thumb's is no proof that the trajectory changed marker; a
+            piece may still change label where its evidence outweighs the cost. The cuts of
+            ``segments`` as given (a reviewer's splits and locks) are free.
 
     Returns:
         the final segments, their labels int64 ``(S,)``, the segment of each sample ``(n,)`` and
         facts (swaps split, refinement rounds).
     """
+    free = _joins(segments)
+    crossing_at: set[tuple[int, int]] = set()
+    if split_swaps and crossings:
+        segments = split_segments(segments, crossings)
+        crossing_at = {(int(slot), int(f)) for slot, frames in crossings.items() for f in frames}
     seg = segment_of(segments, samples.frame, samples.slot)
     swaps = find_swaps(samples, seg, segments) if split_swaps else {}
     if swaps:
@@ -379,7 +443,8 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
         weights[:, -1] += null_prior[0] * tracklet_share(segments) + null_prior[1] * count
         first_locked = locked_at[segments.start, segments.slot]
         locked = {int(i): int(first_locked[i]) for i in np.flatnonzero(first_locked >= NULL)}
-        labels = exclusive_assignment(weights, segments, locked)
+        switch = switch_costs(segments, free, crossing_at, switch_cost)
+        labels = exclusive_assignment(weights, segments, locked, switch=switch)
         labels[(count == 0) & (first_locked < NULL)] = NULL  # never scored (beyond the cap): no evidence
         if facts["refined"] >= refine:
             break
@@ -390,6 +455,32 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
         seg = segment_of(segments, samples.frame, samples.slot)
         facts["refined"] += 1
     return segments, labels, seg, facts
+
+
+def _joined(segments: Segments) -> np.ndarray:
+    """bool ``(S,)``: segment ``s`` begins right where segment ``s - 1`` of its slot ends."""
+    out = np.zeros(len(segments), dtype=bool)
+    out[1:] = (segments.slot[1:] == segments.slot[:-1]) & (segments.start[1:] == segments.stop[:-1])
+    return out
+
+
+def _joins(segments: Segments) -> set[tuple[int, int]]:
+    """``(slot, frame)`` where a segment begins right where the one before it in its slot ends."""
+    j = np.flatnonzero(_joined(segments))
+    return set(zip(segments.slot[j].tolist(), segments.start[j].tolist()))
+
+
+def switch_costs(segments: Segments, free: set[tuple[int, int]], crossing_at: set[tuple[int, int]],
+                 cost: tuple[float, float]) -> np.ndarray:
+    """float ``(S,)``: what segment ``s`` pays for a label other than segment ``s - 1``'s: ``cost[0]``
+    where a crossing cut them apart, ``cost[1]`` where any other cut of the vote did, 0 where they
+    are not pieces of one trajectory or where the cut is in ``free``."""
+    out = np.zeros(len(segments))
+    for j in np.flatnonzero(_joined(segments)).tolist():
+        at = (int(segments.slot[j]), int(segments.start[j]))
+        if at not in free:
+            out[j] = cost[0] if at in crossing_at else cost[1]
+    return out
 
 
 def _clash_cuts(weights: np.ndarray, labels: np.ndarray, segments: Segments,
