@@ -209,7 +209,8 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     locked = locked or {}
     if n == 0:
         return np.zeros(0, dtype=np.int64)
-    switch = np.zeros(n) if switch is None else np.asarray(switch, dtype=np.float64)
+    switch = np.zeros(n) if switch is None else np.array(switch, dtype=np.float64)
+    switch[0] = 0.0  # the first segment follows none
     chain = np.cumsum(switch <= 0) - 1  # pieces of one trajectory joined by a paid switch
     top = np.argsort(-weights[:, :m], axis=1)[:, :min(candidates or m, m)]
     # A label weighing no more than null is never worth taking: null scores higher and frees the
@@ -283,9 +284,11 @@ def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarra
     # A switch variable is at least z(s - 1, l) - z(s, l) for every label l of s - 1: it is 1
     # wherever the two pieces differ.
     var_of = {(int(a), int(b)): i for i, (a, b) in enumerate(zip(var_seg, var_lab))}
+    # var_seg is sorted: segment s's variables are seg_vars[s]:seg_vars[s + 1].
+    seg_vars = np.searchsorted(var_seg, np.arange(n + 1))
     link_rows = []
     for j, s in enumerate(links.tolist()):
-        for v in np.flatnonzero(var_seg == s - 1).tolist():
+        for v in range(seg_vars[s - 1], seg_vars[s]):
             row = [(n_pairs + j, 1.0), (v, -1.0)]
             w = var_of.get((s, int(var_lab[v])))
             if w is not None:
