@@ -238,3 +238,35 @@ def test_misplacement_moves_finger_markers_towards_the_middle_of_the_hand():
         distal = np.char.endswith(bone, "_dist")
         assert spread[distal].mean() == pytest.approx(0.006, rel=0.1)
         assert spread[~distal].mean() == pytest.approx(0.003, rel=0.1)
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_touch_puts_the_thumb_pad_on_the_finger_and_bends_only_those_two_digits(side):
+    from mocap_autolabel.core.hand.ik import HandSolver
+    from mocap_autolabel.core.hand.skeleton import BONE_INDEX, JOINT_NAMES, N_DOF
+    from mocap_autolabel.core.hand.skin import Binding, segment_weights, skin_point
+    from mocap_autolabel.core.synth.frames import CONTACT_SITES
+    from mocap_autolabel.core.synth.generate import touch
+    from mocap_autolabel.core.synth.poses import sample_joint_angles
+
+    hand = HandModel(side=side)
+    poses = np.zeros((6, N_DOF))
+    poses[:, 6:] = sample_joint_angles(np.random.default_rng(3), 6)
+    touched = 0
+    for finger, (bone, along, angle) in zip(("index", "middle", "ring", "little"), CONTACT_SITES * 2):
+        out, gap = touch(hand, poses, finger, bone, along, angle)
+        bones = np.array([BONE_INDEX["thumb_dist"], BONE_INDEX[f"{finger}_{bone}"]])
+        rest = np.array([skin_point(hand, bones[0], 0.6, np.pi)[0], skin_point(hand, bones[1], along, angle)[0]])
+        solver = HandSolver(hand, Binding(rest, *segment_weights(bones, np.array([0.6, along]))))
+        pads, before = solver.markers(out), solver.markers(poses)
+        np.testing.assert_allclose(gap, np.linalg.norm(pads[:, 0] - pads[:, 1], axis=1), atol=1e-12)
+        assert (gap < np.linalg.norm(before[:, 0] - before[:, 1], axis=1) - 0.005).all()  # all closed in
+        touched += int((gap < 0.001).sum())
+        kept = [6 + i for i, n in enumerate(JOINT_NAMES) if not n.startswith(("thumb", finger))]
+        np.testing.assert_array_equal(out[:, kept], poses[:, kept])  # the other digits and the wrist stay
+        np.testing.assert_array_equal(out[:, :6], poses[:, :6])
+        lo, hi = POSE_LIMITS
+        assert (out[:, 6:] >= lo[6:] - 1e-9).all() and (out[:, 6:] <= hi[6:] + 1e-9).all()
+    # 17 of these 24 starts touch; the rest are held apart by joint limits (most at the little
+    # finger), and the gap says so.
+    assert touched >= 16
