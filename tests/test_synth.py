@@ -245,7 +245,6 @@ def test_touch_puts_the_thumb_pad_on_the_finger_and_bends_only_those_two_digits(
     from mocap_autolabel.core.hand.ik import HandSolver
     from mocap_autolabel.core.hand.skeleton import BONE_INDEX, JOINT_NAMES, N_DOF
     from mocap_autolabel.core.hand.skin import Binding, segment_weights, skin_point
-    from mocap_autolabel.core.synth.frames import CONTACT_SITES
     from mocap_autolabel.core.synth.generate import touch
     from mocap_autolabel.core.synth.poses import sample_joint_angles
 
@@ -253,7 +252,9 @@ def test_touch_puts_the_thumb_pad_on_the_finger_and_bends_only_those_two_digits(
     poses = np.zeros((6, N_DOF))
     poses[:, 6:] = sample_joint_angles(np.random.default_rng(3), 6)
     touched = 0
-    for finger, (bone, along, angle) in zip(("index", "middle", "ring", "little"), CONTACT_SITES * 2):
+    # The thumb's pad on a fingertip's pad, on its thumb side, on the middle phalanx's thumb side.
+    sites = (("dist", 0.6, np.pi), ("dist", 0.5, np.pi / 2), ("mid", 0.5, np.pi / 2))
+    for finger, (bone, along, angle) in zip(("index", "middle", "ring", "little"), sites * 2):
         out, gap = touch(hand, poses, finger, bone, along, angle)
         bones = np.array([BONE_INDEX["thumb_dist"], BONE_INDEX[f"{finger}_{bone}"]])
         rest = np.array([skin_point(hand, bones[0], 0.6, np.pi)[0], skin_point(hand, bones[1], along, angle)[0]])

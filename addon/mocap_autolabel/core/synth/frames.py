@@ -7,7 +7,6 @@ distractor markers of the body or of objects around it.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +15,7 @@ from ..hand.skeleton import BONE_NAMES, DOF_INDEX, FINGERS, N_DOF, HandModel, sa
 from ..hand.skin import blend
 from ..layout import Layout
 from ..rotations import random_rotations
-from .generate import EMPTY, GHOST, _slip, touch
+from .generate import EMPTY, GHOST, _slip
 from .poses import sample_joint_angles, widened_limits
 
 
@@ -46,10 +45,6 @@ class FrameConfig:
     # fingertips of real hands and gloves bunch together, most visibly in a fist.
     tip_convergence: float = 0.0
     hands: int = 64  # distinct hands (size, side, placement) per call
-    # Share of poses in which the thumb's pad touches a finger (tip pinches, the side of a
-    # fingertip or of a middle phalanx): the poses in which the thumb is hardest to tell from
-    # the finger it touches (:func:`contact_bank`).
-    contact: float = 0.0
 
     @property
     def max_points(self) -> int:
@@ -93,10 +88,6 @@ def hand_frames(layout: Layout, n: int, rng: np.random.Generator, cfg: FrameConf
         binding = binding.moved(_misplacement(rng, binding, hand, cfg.placement_sd, cfg.tip_convergence))
         pose = np.zeros((len(rows), N_DOF))
         pose[:, 6:] = sample_joint_angles(rng, len(rows), margin_deg=cfg.range_margin_deg)
-        if cfg.contact > 0:
-            bank = contact_bank()
-            touching = rng.random(len(rows)) < cfg.contact
-            pose[touching, 6:] = bank[rng.integers(len(bank), size=int(touching.sum()))]
         lo, hi = widened_limits(cfg.range_margin_deg)
         if cfg.convergence > 0:
             c = rng.uniform(-cfg.convergence, cfg.convergence, size=len(FINGERS))
@@ -107,33 +98,6 @@ def hand_frames(layout: Layout, n: int, rng: np.random.Generator, cfg: FrameConf
         r, t = hand.skinning_transforms(pose)
         out[rows] = blend(r, t, binding)
     return out
-
-
-#: Where the thumb's pad touches in :func:`contact_bank`: (finger bone, fraction along it, angle
-#: around it: pi palmar, pi/2 its thumb side).
-CONTACT_SITES = (("dist", 0.6, np.pi), ("dist", 0.5, np.pi / 2), ("mid", 0.5, np.pi / 2))
-#: Largest gap (metres) between the pads of a pose kept in :func:`contact_bank`.
-CONTACT_GAP = 0.002
-
-
-@functools.lru_cache(maxsize=1)
-def contact_bank(per_site: int = 400, seed: int = 7) -> np.ndarray:
-    """Joint angles ``(N, 20)`` radians of poses in which the thumb's pad touches a finger: for
-    each finger and each of :data:`CONTACT_SITES`, ``per_site`` random poses bent (thumb and that
-    finger only) until they touch (``touch``), on an average right hand; the starts whose joint
-    limits keep the pads more than :data:`CONTACT_GAP` apart are left out. Joint angles carry
-    over to other hands and to the left side closely enough: the contact there is near, not
-    exact, as on a real glove. Computed once per process (about two minutes), seeded."""
-    rng = np.random.default_rng(seed)
-    hand = HandModel(length=0.187, breadth=0.083, side="right")
-    out = []
-    for finger in FINGERS:
-        for bone, along, angle in CONTACT_SITES:
-            poses = np.zeros((per_site, N_DOF))
-            poses[:, 6:] = sample_joint_angles(rng, per_site)
-            bent, gap = touch(hand, poses, finger, bone, along, angle)
-            out.append(bent[gap <= CONTACT_GAP, 6:])
-    return np.concatenate(out)
 
 
 #: Sideways shift of each finger's markers (index to little) per unit of ``tip_convergence``,
