@@ -170,13 +170,13 @@ def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: s
     seg, m1 = seg[ok], samples.logp.shape[1]
     count = np.bincount(seg, minlength=n_segments).astype(np.float64)
     if score == "likelihood":
-        w = np.zeros((n_segments, m1))
-        np.add.at(w, seg, samples.logp[ok].astype(np.float64))
-        return w, count
+        # Sums per segment as a sparse product: many times faster than np.add.at.
+        member = csr_matrix((np.ones(len(seg)), (seg, np.arange(len(seg)))), shape=(n_segments, len(seg)))
+        return np.asarray(member @ samples.logp[ok].astype(np.float64)), count
     if score == "power":
         col = np.where(samples.label[ok] >= 0, samples.label[ok], m1 - 1).astype(np.int64)
-        acc = np.zeros((n_segments, m1))
-        np.add.at(acc, (seg, col), samples.confidence[ok].astype(np.float64) ** p)
+        acc = np.bincount(seg * m1 + col, weights=samples.confidence[ok].astype(np.float64) ** p,
+                          minlength=n_segments * m1).reshape(n_segments, m1)
         s = np.maximum(count, 1.0)[:, None] ** q * acc ** (1.0 / p)
         return s * count[:, None], count
     raise ValueError(f"unknown voting score {score!r}: 'likelihood' or 'power'")
