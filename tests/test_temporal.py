@@ -14,7 +14,8 @@ from mocap_autolabel.core.metrics import segments_right
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
-from mocap_autolabel.core.temporal.confidence import fit_calibration, load_null_prior, load_switch_cost
+from mocap_autolabel.core.temporal.confidence import fit_calibration, load_null_prior, load_partner, load_switch_cost
+from mocap_autolabel.core.temporal.partners import RigidPairs, partner_logp, rigid_pairs
 from mocap_autolabel.core.temporal.viterbi import viterbi_labels
 from mocap_autolabel.core.temporal.voting import (
     Samples,
@@ -150,19 +151,22 @@ def test_null_prior_is_paid_once_per_segment():
     assert labels.tolist() == [NULL, 0]
 
 
-def test_label_take_uses_the_shipped_null_prior_and_switch_cost_unless_given_them():
+def test_label_take_uses_the_shipped_vote_settings_unless_given_them():
     layout = load_layout("glove13")
     s = synthesize(layout, 240, seed=4)
     shipped, switch = load_null_prior("set", "vote", "glove13"), load_switch_cost("set", "vote", "glove13")
-    assert shipped[0] > 0.0 and switch[1] > 0.0  # fitted by training.confidence for the default pipeline
+    partner = load_partner("set", "vote", "glove13")
+    # Fitted by training.confidence for the default pipeline.
+    assert shipped[0] > 0.0 and switch[1] > 0.0 and any(partner)
     info = label_take(s.take, layout).info
     assert info["null_prior"] == list(shipped) and info["switch_cost"] == list(switch)
-    info = label_take(s.take, layout, null_prior=(0.0, 0.0), switch_cost=(0.0, 0.0)).info
-    assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0]
+    assert info["partner"] == list(partner)
+    info = label_take(s.take, layout, null_prior=(0.0, 0.0), switch_cost=(0.0, 0.0), partner=(0.0, 0.0)).info
+    assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0] and info["partner"] == [0.0, 0.0]
     info = label_take(s.take, layout, score="power").info  # fitted for the likelihood score only
-    assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0]
-    assert load_null_prior("set", "vote", "no_such_layout") == (0.0, 0.0)
-    assert load_switch_cost("set", "vote", "no_such_layout") == (0.0, 0.0)
+    assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0] and info["partner"] == [0.0, 0.0]
+    for load in (load_null_prior, load_switch_cost, load_partner):
+        assert load("set", "vote", "no_such_layout") == (0.0, 0.0)
 
 
 def test_exclusivity_is_an_assignment_not_greedy():
@@ -489,3 +493,61 @@ def test_every_sample_lands_in_exactly_one_output_point(name, tmp_path, han19):
     back = read_take(path)
     assert back.names[:len(layout)] == layout.names and back.valid.sum() == take.valid.sum()
 
+
+
+def test_rigid_pairs_are_the_markers_of_one_bone(han19):
+    rigid = rigid_pairs(han19)
+    pairs = {(han19.names[a], han19.names[b]) for a, b in rigid.pairs}
+    assert {("ThumbIP", "ThumbTip"), ("ThumbTip", "ThumbIP"), ("BackHand1", "BackHand2")} <= pairs
+    assert ("PinkyPIP", "PinkyTip") not in pairs  # across the DIP joint: the distance bends
+    assert len(pairs) == len(rigid) == 8  # both orders of the thumb pair and of the three back-of-hand pairs
+    tip, ip = han19.names.index("ThumbTip"), han19.names.index("ThumbIP")
+    d = rigid.distance[(rigid.pairs[:, 0] == tip) & (rigid.pairs[:, 1] == ip)][0]
+    assert 0.02 < d < 0.03
+    assert not len(rigid_pairs(load_layout("tips5")))
+
+
+def test_partner_evidence_counts_each_labeled_partner_at_its_distance():
+    rigid = RigidPairs(np.array([[0, 1], [1, 0]]), np.array([0.03, 0.03]), np.array([0.005, 0.005]))
+    # Frame 0: label 1 at the origin, a sample 31 mm away, one 60 mm away. Frame 1: no label 1.
+    positions = np.array([[0.0, 0, 0], [0.031, 0, 0], [0.06, 0, 0], [0.03, 0, 0]])
+    frame = np.array([0, 0, 0, 1])
+    label = np.array([1, NULL, NULL, NULL])
+    out = partner_logp(positions, frame, label, 3, rigid, inside=2.0, outside=1.0)
+    assert out.shape == (4, 4)
+    assert out[:, 0].tolist() == [0.0, 2.0, -1.0, 0.0]  # the partner itself is not its own partner
+    assert (out[:, 1:] == 0).all()  # label 0 is never labeled here, so label 1 earns nothing; null never
+
+
+def test_a_thumb_tip_read_as_null_is_labeled_at_its_rigid_distance_from_thumb_ip(han19):
+    """A long trajectory that the labeler finds slightly more null than ThumbTip in every frame is
+    left null by the vote alone, and labeled ThumbTip once it counts that it keeps its distance
+    to the labeled ThumbIP."""
+    from mocap_autolabel.core.labelers import pack_frames
+    from mocap_autolabel.core.labelers.base import Labeler
+    from mocap_autolabel.core.synth.generate import clean_config
+
+    s = synthesize(han19, 300, seed=5, config=clean_config())
+    tip = han19.names.index("ThumbTip")
+
+    class TruthLabeler(Labeler):
+        layout = han19
+
+        def scores(self, points, mask):
+            batch = pack_frames(s.take.positions, max_points=points.shape[1])
+            truth = np.take_along_axis(s.labels, np.maximum(batch.slots, 0), axis=1)
+            p = np.full(points.shape[:2] + (len(han19) + 1,), 0.002)
+            rows, cols = np.nonzero(mask)
+            p[rows, cols, truth[rows, cols]] = 0.9
+            thumb = mask & (truth == tip)
+            p[thumb, tip], p[thumb, -1] = 0.4, 0.55
+            return np.log(p)
+
+    labeler = TruthLabeler()
+    without = label_take(s.take, han19, labeler=labeler, partner=(0.0, 0.0))
+    with_partner = label_take(s.take, han19, labeler=labeler, partner=(2.0, 2.0))
+    slot = int(np.flatnonzero((s.labels == tip).any(axis=0))[0])
+    assert set(without.per_sample()[:, slot].tolist()) == {NULL}
+    assert set(with_partner.per_sample()[:, slot].tolist()) == {tip}
+    assert with_partner.info["partner"] == [2.0, 2.0]
+    assert _accuracy(with_partner, s.take, s.labels) == 1.0

@@ -4,7 +4,7 @@ For each shipped layout and each method x temporal mode in :data:`COMBOS`, label
 takes (the generator's realistic takes, and clean tracks broken up by ``corrupt_take``), record
 each segment's raw confidence and whether it was entirely right, and fit the monotone,
 conservative map of ``core/temporal/confidence.py``. For the default pipeline (:data:`PRIOR_COMBOS`)
-it first fits the vote's switch cost and null prior (:func:`fit_vote_setting`) and calibrates
+it first fits the vote's switch cost, null prior and rigid-partner evidence (:func:`fit_vote_setting`) and calibrates
 the decisions made with them. ``gmm`` is fitted on the first :data:`FIT_FRAMES` true frames of each take and ``nearest``
 starts from the true first frame; only the frames after those are labeled. Writes
 ``addon/mocap_autolabel/models/confidence.json``. Needs no PyTorch; rerun after retraining a model.
@@ -33,6 +33,7 @@ from mocap_autolabel.core.temporal.confidence import (
     calibration_key,
     fit_calibration,
     load_null_prior,
+    load_partner,
 )
 
 #: Seeds of the calibration takes: apart from the benchmarks' and the tests' seeds.
@@ -57,6 +58,11 @@ SWITCH_COSTS = (0.0, 10.0, 20.0, 40.0, 60.0, 100.0, 200.0, 300.0, 500.0)
 #: The smallest value within this many points of the best share of correct instances wins: past
 #: the knee the gain is flat, while a larger prior drops more real markers seen for a frame or two.
 PRIOR_TOLERANCE = 0.01
+#: Rigid-partner evidence tried, ``(inside, outside)`` nats per sample (see
+#: ``core.temporal.partners``); the best wins, without the tolerance: no value is the cautious one.
+#: On han19's takes a penalty outside the distance helped and credit inside it did not beyond a nat.
+PARTNERS = ((0.0, 0.0), (0.0, 2.0), (0.5, 2.0), (1.0, 1.0), (1.0, 2.0), (1.0, 3.0), (1.0, 4.0), (1.0, 6.0),
+            (2.0, 2.0), (2.0, 4.0), (2.0, 6.0), (3.0, 3.0))
 
 
 def validation_takes(layout, takes: int, frames: int) -> list:
@@ -84,15 +90,17 @@ def segment_outcomes(labeling, take, truth) -> np.ndarray:
     return np.column_stack([labeling.evidence, segments_right(labeling, truth, take.valid), labeling.label >= 0])
 
 
-def fit_vote_setting(data: list, layout, method: str, option: str, values, **fixed) -> tuple[float, dict]:
+def fit_vote_setting(data: list, layout, method: str, option: str, values, tolerance: float = PRIOR_TOLERANCE,
+                     **fixed) -> tuple:
     """Fit one setting of ``method`` + vote on validation takes: ``option`` is ``"null_prior"``
-    (per tracklet) or ``"switch_cost"`` (at the vote's own cuts), tried at ``values``; ``fixed``
-    holds the other settings. Returns the smallest value within :data:`PRIOR_TOLERANCE` of the
-    best share of correct instances, and that share (%) for every value tried."""
+    (per tracklet), ``"switch_cost"`` (at the vote's own cuts) or ``"partner"`` (``(inside,
+    outside)`` pairs), tried at ``values``; ``fixed`` holds the other settings. Returns the
+    smallest value within ``tolerance`` points of the best share of correct instances, and that
+    share (%) for every value tried."""
     labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
     results = {}
     for value in values:
-        setting = (value, 0.0) if option == "null_prior" else (0.0, value)
+        setting = {"null_prior": (value, 0.0), "switch_cost": (0.0, value)}.get(option, value)
         correct = instances = 0
         for (take, truth, _), labeler in zip(data, labelers):
             labeling = label_take(take, layout, method=method, temporal="vote", labeler=labeler, calibrate=False,
@@ -101,7 +109,7 @@ def fit_vote_setting(data: list, layout, method: str, option: str, values, **fix
             correct, instances = correct + s.correct, instances + s.instances
         results[value] = round(100.0 * correct / instances, 4)
     best = max(results.values())
-    return min(v for v, share in results.items() if share >= best - PRIOR_TOLERANCE), results
+    return min(v for v, share in results.items() if share >= best - tolerance), results
 
 
 def shipped_layouts() -> list[str]:
@@ -128,18 +136,22 @@ def main(argv: list[str] | None = None) -> int:
         combos = [tuple(c.split("/")) for c in args.only] if args.only else COMBOS
         for method, temporal in combos:
             seg = []
-            prior, switch, tried = 0.0, 0.0, {}
+            prior, switch, partner, tried = 0.0, 0.0, (0.0, 0.0), {}
             if (method, temporal) in PRIOR_COMBOS:
-                # The switch cost at the shipped prior, then the prior at that cost.
+                # The switch cost at the shipped prior and partner evidence, then the prior at that
+                # cost, then the partner evidence at both.
                 shipped = load_null_prior(method, temporal, name, args.out)
+                shipped_partner = load_partner(method, temporal, name, args.out)
                 switch, tried["switch_cost"] = fit_vote_setting(data, layout, method, "switch_cost", SWITCH_COSTS,
-                                                                null_prior=shipped)
+                                                                null_prior=shipped, partner=shipped_partner)
                 prior, tried["null_prior"] = fit_vote_setting(data, layout, method, "null_prior", NULL_PRIORS,
-                                                              switch_cost=(0.0, switch))
-                print(f"{name} {method}+{temporal}: switch cost {switch} nats, null prior {prior} nats per tracklet; "
-                      f"correct % tried: {tried}", file=sys.stderr)
+                                                              switch_cost=(0.0, switch), partner=shipped_partner)
+                partner, tried["partner"] = fit_vote_setting(data, layout, method, "partner", PARTNERS, tolerance=0.0,
+                                                             switch_cost=(0.0, switch), null_prior=(prior, 0.0))
+                print(f"{name} {method}+{temporal}: switch cost {switch} nats, null prior {prior} nats per tracklet, "
+                      f"partner evidence {partner}; correct % tried: {tried}", file=sys.stderr)
             for take, truth, markers in data:
-                options = {"null_prior": (prior, 0.0), "switch_cost": (0.0, switch)}
+                options = {"null_prior": (prior, 0.0), "switch_cost": (0.0, switch), "partner": partner}
                 if method == "gmm":
                     options["labeler"] = GmmLabeler(layout).fit(markers[:FIT_FRAMES])
                 if method == "nearest":
@@ -154,7 +166,8 @@ def main(argv: list[str] | None = None) -> int:
             if tried:
                 table[calibration_key(method, temporal, name)].update(
                     null_prior=[prior, 0.0], null_prior_tried={str(k): v for k, v in tried["null_prior"].items()},
-                    switch_cost=[0.0, switch], switch_cost_tried={str(k): v for k, v in tried["switch_cost"].items()})
+                    switch_cost=[0.0, switch], switch_cost_tried={str(k): v for k, v in tried["switch_cost"].items()},
+                    partner=list(partner), partner_tried={str(list(k)): v for k, v in tried["partner"].items()})
             hi = cal(evidence, labeled=labeled) >= 0.95  # as the pipeline calls it
             print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
                   f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "

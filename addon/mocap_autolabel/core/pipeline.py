@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -22,7 +22,14 @@ from .labelers.assign import assign, row_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
 from .layout import Layout
 from .take import Take
-from .temporal.confidence import load_calibration, load_null_prior, load_switch_cost, segment_evidence
+from .temporal.confidence import (
+    load_calibration,
+    load_null_prior,
+    load_partner,
+    load_switch_cost,
+    segment_evidence,
+)
+from .temporal.partners import partner_logp, rigid_pairs
 from .temporal.voting import (
     LOG_FLOOR,
     Samples,
@@ -112,7 +119,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                n_best: int = 5, split_swaps: bool = True, labeler: Labeler | None = None, calibrate: bool = True,
                validate: bool = False, hand: Calibration | None = None, splits: Sequence[tuple[int, int]] = (),
                null_prior: tuple[float, float] | None = None, switch_cost: tuple[float, float] | None = None,
-               progress: Callable[[str], None] | None = None) -> Labeling:
+               partner: tuple[float, float] | None = None, progress: Callable[[str], None] | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -141,6 +148,11 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         switch_cost: ``(at a crossing, at any other cut)`` nats a trajectory pays to change label
             between pieces the vote cut it into (``vote`` with ``likelihood`` only); default: the
             one fitted for this method and layout, shipped beside the null prior.
+        partner: ``(inside, outside)`` nats per sample for (against) a label whose rigid partner
+            (a marker of the same bone) the first vote labeled at (not at) the pair's distance in
+            that frame; the vote then runs again (:mod:`.temporal.partners`; ``vote`` with
+            ``likelihood`` only). Default: the one fitted for this method and layout, shipped
+            beside the null prior.
         progress: called with a short message at each stage.
 
     Returns:
@@ -196,10 +208,13 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if switch_cost is None:
         switch_cost = load_switch_cost(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
     info["switch_cost"] = [float(v) for v in switch_cost]
+    if partner is None:
+        partner = load_partner(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
+    info["partner"] = [float(v) for v in partner]
 
     def decide(scores: np.ndarray) -> Labeling:
         return _decide(scores, batch, take, layout, method, temporal, segments, locked_at, info, score, p, q,
-                       split_swaps, n_best, calibrate, null_prior, crossings, switch_cost)
+                       split_swaps, n_best, calibrate, null_prior, crossings, switch_cost, partner)
 
     say(f"temporal step: {temporal}")
     t = time.perf_counter()
@@ -225,7 +240,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
 def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, method: str, temporal: str,
             segments: Segments, locked_at: np.ndarray, info: dict, score: str, p: float, q: float,
             split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float],
-            crossings: dict[int, list[int]], switch_cost: tuple[float, float]) -> Labeling:
+            crossings: dict[int, list[int]], switch_cost: tuple[float, float],
+            partner: tuple[float, float] | None) -> Labeling:
     """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
@@ -235,13 +251,23 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
     samples = Samples(frame=f_idx.astype(np.int64), slot=slots[f_idx, k_idx].astype(np.int64), logp=logp,
                       label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
     if temporal == "vote":
-        segments, label, seg, facts = vote(samples, segments, locked_at, score, p, q, split_swaps,
-                                           null_prior=null_prior, crossings=crossings, switch_cost=switch_cost)
+        def run_vote(scored: Samples) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
+            return vote(scored, segments, locked_at, score, p, q, split_swaps, null_prior=null_prior,
+                        crossings=crossings, switch_cost=switch_cost)
+
+        decided, label, seg, facts = run_vote(samples)
+        rigid = rigid_pairs(layout) if partner and any(partner) else None
+        if rigid is not None and len(rigid):
+            # Vote again with the evidence of rigid partners, read off the first vote's labels.
+            per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
+            extra = partner_logp(points[f_idx, k_idx].astype(np.float64), samples.frame, per, len(layout), rigid,
+                                 *partner)
+            decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra.astype(np.float32)))
         info.update(facts)
-        first_locked = locked_at[segments.start, segments.slot]
+        first_locked = locked_at[decided.start, decided.slot]
         labeling = Labeling(names=layout.names, n_frames=take.n_frames, n_points=take.n_points,
-                            slot=segments.slot, start=segments.start, stop=segments.stop,
-                            label=label.astype(np.int16), confidence=np.zeros(len(segments), dtype=np.float32),
+                            slot=decided.slot, start=decided.start, stop=decided.stop,
+                            label=label.astype(np.int16), confidence=np.zeros(len(decided), dtype=np.float32),
                             locked=first_locked != EMPTY, info=info)
     else:
         if temporal == "viterbi":

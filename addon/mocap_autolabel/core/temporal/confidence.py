@@ -239,3 +239,9 @@ def load_switch_cost(method: str, temporal: str, layout: str, path: str = CALIBR
     """The shipped switch cost ``(at a crossing, at any other cut)`` of a method, temporal mode and
     layout (see :func:`.voting.vote`); free switches where none was fitted."""
     return _fitted_pair(method, temporal, layout, path, "switch_cost")
+
+
+def load_partner(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> tuple[float, float]:
+    """The shipped rigid-partner evidence ``(inside, outside)`` nats per sample of a method,
+    temporal mode and layout (see :mod:`.partners`); none where none was fitted."""
+    return _fitted_pair(method, temporal, layout, path, "partner")

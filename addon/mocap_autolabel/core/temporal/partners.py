@@ -1,0 +1,99 @@
+"""Evidence from rigid partners: pairs of markers that keep their distance whatever the pose.
+
+Two markers on one bone (``ThumbIP`` and ``ThumbTip`` of ``han19``, the back-of-hand markers of
+a glove) stay a fixed distance apart in every frame. The per-frame labelers see one frame at a
+time and cannot use that: a thumb tip pressed against a finger reads as the finger's marker in
+every frame of a long trajectory, loses that label to the finger's own trajectory and is left
+null, although its distance to the labeled ``ThumbIP`` never changes. A ghost keeps such a
+distance for a frame or two at most. Once the vote has labeled the take, every sample earns
+evidence for each label whose rigid partner is labeled in its frame: ``inside`` nats where its
+distance to that partner is within the tolerance of the pair's distance, ``-outside`` where it
+is not. The vote is then run again with that evidence added.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..hand.ik import HandSolver
+from ..hand.skeleton import N_DOF, HandModel
+from ..layout import Layout
+from ..synth.poses import sample_joint_angles
+
+#: A pair is rigid when its distance varies less than this over random poses (metres, SD): the
+#: markers of one bone, and han19's ThumbIP and ThumbTip (1.1 mm: ThumbIP sits at the IP joint);
+#: the next pairs vary by 2.4 mm and more (a finger's PIP and tip markers across the DIP joint).
+RIGID_SD = 0.0015
+#: Tolerance on a rigid pair's distance: this much plus :data:`TOLERANCE_SHARE` of the distance
+#: (hands differ in size by about 10 %, skin and glove slip by millimetres).
+TOLERANCE = 0.004
+TOLERANCE_SHARE = 0.15
+
+
+@dataclass(frozen=True)
+class RigidPairs:
+    """Pairs of a layout's markers that keep their distance.
+
+    Attributes:
+        pairs: int ``(R, 2)`` label indices, both orders listed (a label's partners are the rows
+            that start with it).
+        distance: ``(R,)`` metres, on an average hand.
+        tolerance: ``(R,)`` metres.
+    """
+
+    pairs: np.ndarray
+    distance: np.ndarray
+    tolerance: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.pairs.shape[0])
+
+
+@functools.lru_cache(maxsize=16)
+def rigid_pairs(layout: Layout, poses: int = 256, seed: int = 0) -> RigidPairs:
+    """The rigid pairs of ``layout``, found on an average hand in ``poses`` random poses (cached
+    per layout: about 30 ms)."""
+    hand = HandModel()
+    binding, _ = layout.place(hand)
+    pose = np.zeros((poses, N_DOF))
+    pose[:, 6:] = sample_joint_angles(np.random.default_rng(seed), poses)
+    x = HandSolver(hand, binding).markers(pose)  # (P, M, 3)
+    d = np.linalg.norm(x[:, :, None] - x[:, None, :], axis=3)
+    sd, mean = d.std(axis=0), d.mean(axis=0)
+    i, j = np.nonzero((sd < RIGID_SD) & ~np.eye(len(layout), dtype=bool))
+    dist = mean[i, j]
+    return RigidPairs(np.stack([i, j], axis=1).astype(np.int64), dist, TOLERANCE + TOLERANCE_SHARE * dist)
+
+
+def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_labels: int,
+                 rigid: RigidPairs, inside: float, outside: float) -> np.ndarray:
+    """Evidence ``(n, M + 1)`` nats of each sample for each label from its rigid partners.
+
+    Args:
+        positions: ``(n, 3)`` metres, the samples' positions.
+        frame: int ``(n,)`` their frames.
+        label: int ``(n,)`` their labels so far (negative: null).
+        n_labels: ``M``.
+        rigid: the layout's rigid pairs.
+        inside, outside: nats for (against) a label per partner at (not at) its distance.
+
+    Returns:
+        ``(n, M + 1)``; the null column is 0.
+    """
+    n = len(frame)
+    out = np.zeros((n, n_labels + 1))
+    if not len(rigid) or not n or (inside == 0 and outside == 0):
+        return out
+    held = label >= 0
+    frames = int(frame.max()) + 1
+    where = np.full((frames, n_labels, 3), np.nan)
+    where[frame[held], label[held]] = positions[held]
+    for (a, b), dist, tol in zip(rigid.pairs, rigid.distance, rigid.tolerance):
+        partner = where[frame, b]
+        seen = ~np.isnan(partner[:, 0]) & (label != b)
+        d = np.linalg.norm(positions[seen] - partner[seen], axis=1)
+        out[seen, a] += np.where(np.abs(d - dist) <= tol, inside, -outside)
+    return out
