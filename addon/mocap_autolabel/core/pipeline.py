@@ -262,7 +262,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
             per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
             extra = partner_logp(points[f_idx, k_idx].astype(np.float64), samples.frame, per, len(layout), rigid,
                                  *partner)
-            decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra.astype(np.float32)))
+            decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
         info.update(facts)
         first_locked = locked_at[decided.start, decided.slot]
         labeling = Labeling(names=layout.names, n_frames=take.n_frames, n_points=take.n_points,

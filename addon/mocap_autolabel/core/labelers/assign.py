@@ -59,16 +59,15 @@ def assign(scores: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray
     best = np.argmax(scores, axis=2)
     best = np.where(mask, best, m)
     # A frame conflicts when two observations want the same real label.
-    one_hot = np.zeros((frames, m1), dtype=np.int32)
-    np.add.at(one_hot, (np.repeat(np.arange(frames), k), best.ravel()), 1)
-    conflict = (one_hot[:, :m] > 1).any(axis=1)
+    wanted = np.bincount((np.arange(frames)[:, None] * m1 + best).ravel(), minlength=frames * m1).reshape(frames, m1)
+    conflict = (wanted[:, :m] > 1).any(axis=1)
     labels = np.where(best == m, NULL, best)
     for f in np.flatnonzero(conflict):
         rows = np.flatnonzero(mask[f])
         labels[f, rows] = assign_frame(scores[f, rows])
     labels[~mask] = NULL
-    prob = row_probabilities(scores)
-    column = np.where(labels == NULL, m, labels)
-    confidence = np.take_along_axis(prob, column[..., None], axis=2)[..., 0]
-    confidence[~mask] = 0.0
-    return labels.astype(np.int16), confidence.astype(np.float32)
+    confidence = np.zeros((frames, k), dtype=np.float32)
+    rows = row_probabilities(scores[mask])  # real observations only
+    column = np.where(labels[mask] == NULL, m, labels[mask])
+    confidence[mask] = rows[np.arange(len(rows)), column]
+    return labels.astype(np.int16), confidence

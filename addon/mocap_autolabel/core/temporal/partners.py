@@ -81,19 +81,21 @@ def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_
         inside, outside: nats for (against) a label per partner at (not at) its distance.
 
     Returns:
-        ``(n, M + 1)``; the null column is 0.
+        float32 ``(n, M + 1)``; the null column is 0.
     """
     n = len(frame)
-    out = np.zeros((n, n_labels + 1))
+    out = np.zeros((n, n_labels + 1), dtype=np.float32)
     if not len(rigid) or not n or (inside == 0 and outside == 0):
         return out
-    held = label >= 0
-    frames = int(frame.max()) + 1
-    where = np.full((frames, n_labels, 3), np.nan)
-    where[frame[held], label[held]] = positions[held]
-    for (a, b), dist, tol in zip(rigid.pairs, rigid.distance, rigid.tolerance):
-        partner = where[frame, b]
-        seen = ~np.isnan(partner[:, 0]) & (label != b)
-        d = np.linalg.norm(positions[seen] - partner[seen], axis=1)
-        out[seen, a] += np.where(np.abs(d - dist) <= tol, inside, -outside)
+    # The sample that holds each label in each frame, -1 where none does.
+    holder = np.full((int(frame.max()) + 1, n_labels), -1, dtype=np.int64)
+    held = np.flatnonzero(label >= 0)
+    holder[frame[held], label[held]] = held
+    for b in np.unique(rigid.pairs[:, 1]):
+        partner = holder[frame, b]
+        seen = np.flatnonzero((partner >= 0) & (label != b))
+        d = np.linalg.norm(positions[seen] - positions[partner[seen]], axis=1)  # once for every label paired with b
+        for a, dist, tol in zip(rigid.pairs[rigid.pairs[:, 1] == b, 0], rigid.distance[rigid.pairs[:, 1] == b],
+                                rigid.tolerance[rigid.pairs[:, 1] == b]):
+            out[seen, a] += np.where(np.abs(d - dist) <= tol, inside, -outside)
     return out
