@@ -95,7 +95,7 @@ def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_
         partner = holder[frame, b]
         seen = np.flatnonzero((partner >= 0) & (label != b))
         d = np.linalg.norm(positions[seen] - positions[partner[seen]], axis=1)  # once for every label paired with b
-        for a, dist, tol in zip(rigid.pairs[rigid.pairs[:, 1] == b, 0], rigid.distance[rigid.pairs[:, 1] == b],
-                                rigid.tolerance[rigid.pairs[:, 1] == b]):
-            out[seen, a] += np.where(np.abs(d - dist) <= tol, inside, -outside)
+        for r in np.flatnonzero(rigid.pairs[:, 1] == b):
+            at = np.abs(d - rigid.distance[r]) <= rigid.tolerance[r]
+            out[seen, rigid.pairs[r, 0]] += np.where(at, inside, -outside)
     return out
