@@ -13,6 +13,7 @@ starts from the true first frame; only the frames after those are labeled. Write
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import sys
@@ -90,14 +91,14 @@ def segment_outcomes(labeling, take, truth) -> np.ndarray:
     return np.column_stack([labeling.evidence, segments_right(labeling, truth, take.valid), labeling.label >= 0])
 
 
-def fit_vote_setting(data: list, layout, method: str, option: str, values, tolerance: float = PRIOR_TOLERANCE,
-                     **fixed) -> tuple:
+def fit_vote_setting(data: list, layout, method: str, labelers: list, option: str, values,
+                     tolerance: float = PRIOR_TOLERANCE, **fixed) -> tuple:
     """Fit one setting of ``method`` + vote on validation takes: ``option`` is ``"null_prior"``
     (per tracklet), ``"switch_cost"`` (at the vote's own cuts) or ``"partner"`` (``(inside,
     outside)`` pairs), tried at ``values``; ``fixed`` holds the other settings. Returns the
     smallest value within ``tolerance`` points of the best share of correct instances, and that
-    share (%) for every value tried."""
-    labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
+    share (%) for every value tried. ``labelers`` score the takes of ``data``, one each (a
+    :class:`RememberingLabeler` scores each take once for all the fits)."""
     results = {}
     for value in values:
         setting = {"null_prior": (value, 0.0), "switch_cost": (0.0, value)}.get(option, value)
@@ -137,21 +138,25 @@ def main(argv: list[str] | None = None) -> int:
         for method, temporal in combos:
             seg = []
             prior, switch, partner, tried = 0.0, 0.0, (0.0, 0.0), {}
+            labelers = [None] * len(data)
             if (method, temporal) in PRIOR_COMBOS:
+                labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
                 # The switch cost at the shipped prior and partner evidence, then the prior at that
                 # cost, then the partner evidence at both.
                 shipped = load_null_prior(method, temporal, name, args.out)
                 shipped_partner = load_partner(method, temporal, name, args.out)
-                switch, tried["switch_cost"] = fit_vote_setting(data, layout, method, "switch_cost", SWITCH_COSTS,
-                                                                null_prior=shipped, partner=shipped_partner)
-                prior, tried["null_prior"] = fit_vote_setting(data, layout, method, "null_prior", NULL_PRIORS,
-                                                              switch_cost=(0.0, switch), partner=shipped_partner)
-                partner, tried["partner"] = fit_vote_setting(data, layout, method, "partner", PARTNERS, tolerance=0.0,
-                                                             switch_cost=(0.0, switch), null_prior=(prior, 0.0))
+                fit = functools.partial(fit_vote_setting, data, layout, method, labelers)
+                switch, tried["switch_cost"] = fit("switch_cost", SWITCH_COSTS, null_prior=shipped,
+                                                   partner=shipped_partner)
+                prior, tried["null_prior"] = fit("null_prior", NULL_PRIORS, switch_cost=(0.0, switch),
+                                                 partner=shipped_partner)
+                partner, tried["partner"] = fit("partner", PARTNERS, tolerance=0.0, switch_cost=(0.0, switch),
+                                                null_prior=(prior, 0.0))
                 print(f"{name} {method}+{temporal}: switch cost {switch} nats, null prior {prior} nats per tracklet, "
                       f"partner evidence {partner}; correct % tried: {tried}", file=sys.stderr)
-            for take, truth, markers in data:
-                options = {"null_prior": (prior, 0.0), "switch_cost": (0.0, switch), "partner": partner}
+            for (take, truth, markers), labeler in zip(data, labelers):
+                options = {"null_prior": (prior, 0.0), "switch_cost": (0.0, switch), "partner": partner,
+                           "labeler": labeler}
                 if method == "gmm":
                     options["labeler"] = GmmLabeler(layout).fit(markers[:FIT_FRAMES])
                 if method == "nearest":
