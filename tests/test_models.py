@@ -67,6 +67,26 @@ def test_set_is_invariant_to_rotation_translation_mirroring_and_order():
     assert (a == b).mean() > 0.99
 
 
+@pytest.mark.parametrize("method", ONNX_METHODS)
+def test_scores_do_not_depend_on_padding_or_batch_order(method):
+    """The labeler runs frames in batches of like size, each cut to its widest frame: the same
+    frames padded wider, with their observations scattered among the padding, score the same."""
+    layout = load_layout("han19")
+    fr = sample_frames(layout, 300, np.random.default_rng(11), FrameConfig(drop=(0, 5), ghosts=(0, 3)))
+    labeler = make_labeler(method, layout)
+    labeler.batch = 64
+    base = labeler.scores(fr.points, fr.mask)
+    n, k = fr.mask.shape
+    wide = np.zeros((n, k + 9, 3), dtype=np.float32)
+    cols = np.sort(np.random.default_rng(12).permuted(np.tile(np.arange(k + 9), (n, 1)), axis=1)[:, :k], axis=1)
+    np.put_along_axis(wide, cols[..., None], fr.points, axis=1)
+    mask = np.zeros((n, k + 9), dtype=bool)
+    np.put_along_axis(mask, cols, fr.mask, axis=1)
+    out = labeler.scores(wide, mask)
+    back = np.take_along_axis(out, cols[..., None], axis=1)
+    assert np.allclose(back[fr.mask], base[fr.mask], atol=1e-5)
+
+
 def test_model_errors_name_the_file(tmp_path):
     layout = load_layout("han19")
     src = shipped_model("set", "han19")
