@@ -87,6 +87,17 @@ def test_scores_do_not_depend_on_padding_or_batch_order(method):
     assert np.allclose(back[fr.mask], base[fr.mask], atol=1e-5)
 
 
+@pytest.mark.parametrize("method", ONNX_METHODS)
+def test_frames_with_fewer_points_than_the_models_neighbourhood_are_scored(method):
+    """``set`` looks at 8 nearest neighbours; frames (and whole takes) with fewer points work."""
+    layout = load_layout("han19")
+    fr = sample_frames(layout, 40, np.random.default_rng(13), FrameConfig(drop=(13, 17), ghosts=(0, 0),
+                                                                               distractor_share=0.0))
+    few = fr.points[:, :6], fr.mask[:, :6]
+    scores = make_labeler(method, layout).scores(*few)
+    assert scores.shape == (40, 6, len(layout) + 1) and np.isfinite(scores[few[1]]).all()
+
+
 def test_model_errors_name_the_file(tmp_path):
     layout = load_layout("han19")
     src = shipped_model("set", "han19")

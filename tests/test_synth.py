@@ -271,3 +271,27 @@ def test_touch_puts_the_thumb_pad_on_the_finger_and_bends_only_those_two_digits(
     # 17 of these 24 starts touch; the rest are held apart by joint limits (most at the little
     # finger), and the gap says so.
     assert touched >= 16
+
+
+def test_contacts_bend_only_their_frames_and_leave_takes_without_them_as_they_were():
+    from mocap_autolabel.core.synth.generate import add_contacts
+
+    layout = load_layout("han19")
+    plain = synthesize(layout, 1200, seed=4)
+    assert np.array_equal(plain.poses, synthesize(layout, 1200, seed=4, config=SynthConfig()).poses)
+    touching = synthesize(layout, 1200, seed=4, config=SynthConfig(contacts_per_minute=(30.0, 30.0)))
+    changed = np.abs(touching.poses - plain.poses).max(axis=1) > 0
+    assert changed.any() and not changed.all()
+    np.testing.assert_array_equal(touching.poses[:, :6], plain.poses[:, :6])  # the wrist moves as before
+
+    poses = generate_motion(np.random.default_rng(5), 1200, 120.0)
+    before = poses.copy()
+    contacts = add_contacts(np.random.default_rng(6), HandModel(), poses, 120.0, (30.0, 30.0), (0.5, 1.0))
+    assert contacts
+    inside = np.zeros(len(poses), dtype=bool)
+    for start, stop, finger in contacts:
+        assert finger in ("index", "middle", "ring", "little") and 60 <= stop - start <= 120
+        inside[start:stop] = True
+    np.testing.assert_array_equal(poses[~inside], before[~inside])
+    lo, hi = POSE_LIMITS
+    assert (poses[:, 6:] >= lo[6:] - 1e-9).all() and (poses[:, 6:] <= hi[6:] + 1e-9).all()

@@ -15,7 +15,14 @@ from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
 from mocap_autolabel.core.temporal.confidence import fit_calibration, load_null_prior, load_partner, load_switch_cost
-from mocap_autolabel.core.temporal.partners import RigidPairs, partner_logp, rigid_pairs
+from mocap_autolabel.core.temporal.partners import (
+    TOLERANCE,
+    TOLERANCE_SHARE,
+    RigidPairs,
+    partner_logp,
+    rigid_pairs,
+    take_distances,
+)
 from mocap_autolabel.core.temporal.viterbi import viterbi_labels
 from mocap_autolabel.core.temporal.voting import (
     Samples,
@@ -495,16 +502,35 @@ def test_every_sample_lands_in_exactly_one_output_point(name, tmp_path, han19):
 
 
 
-def test_rigid_pairs_are_the_markers_of_one_bone(han19):
+def test_rigid_pairs_are_the_markers_that_keep_their_distance(han19):
     rigid = rigid_pairs(han19)
     pairs = {(han19.names[a], han19.names[b]) for a, b in rigid.pairs}
     assert {("ThumbIP", "ThumbTip"), ("ThumbTip", "ThumbIP"), ("BackHand1", "BackHand2")} <= pairs
-    assert ("PinkyPIP", "PinkyTip") not in pairs  # across the DIP joint: the distance bends
-    assert len(pairs) == len(rigid) == 8  # both orders of the thumb pair and of the three back-of-hand pairs
+    assert ("PinkyPIP", "PinkyTip") in pairs  # across the DIP joint, which bends with the PIP joint
+    assert ("IndexMCP", "IndexPIP") not in pairs  # across the free MCP joint: the distance bends
+    assert ("ThumbTip", "IndexTip") not in pairs
+    assert len(pairs) == len(rigid) == 34  # 17 pairs, both orders
     tip, ip = han19.names.index("ThumbTip"), han19.names.index("ThumbIP")
     d = rigid.distance[(rigid.pairs[:, 0] == tip) & (rigid.pairs[:, 1] == ip)][0]
     assert 0.02 < d < 0.03
     assert not len(rigid_pairs(load_layout("tips5")))
+
+
+def test_a_pair_labeled_together_long_enough_takes_the_takes_own_distance():
+    rigid = RigidPairs(np.array([[0, 1], [1, 0], [0, 2], [2, 0]]), np.full(4, 0.03), np.full(4, 0.0085))
+    frames = 40
+    # Labels 0 and 1 are 45 mm apart in every frame (a larger hand); label 2 is seen in 10 frames.
+    positions = np.zeros((frames, 3, 3))
+    positions[:, 1, 0] = 0.045
+    positions[:, 2, 1] = 0.05
+    label = np.tile([0, 1, 2], (frames, 1))
+    label[10:, 2] = NULL
+    frame = np.repeat(np.arange(frames), 3)
+    own = take_distances(rigid, positions.reshape(-1, 3), frame, label.ravel(), 3, min_frames=30)
+    assert np.allclose(own.distance, [0.045, 0.045, 0.03, 0.03])  # too few frames of label 2: the average's
+    assert np.allclose(own.tolerance, TOLERANCE + TOLERANCE_SHARE * own.distance)
+    fewer = take_distances(rigid, positions.reshape(-1, 3), frame, label.ravel(), 3, min_frames=41)
+    assert np.allclose(fewer.distance, 0.03)
 
 
 def test_partner_evidence_counts_each_labeled_partner_at_its_distance():

@@ -4,7 +4,8 @@ For each shipped layout and each method x temporal mode in :data:`COMBOS`, label
 takes (the generator's realistic takes, and clean tracks broken up by ``corrupt_take``), record
 each segment's raw confidence and whether it was entirely right, and fit the monotone,
 conservative map of ``core/temporal/confidence.py``. For the default pipeline (:data:`PRIOR_COMBOS`)
-it first fits the vote's switch cost, null prior and rigid-partner evidence (:func:`fit_vote_setting`) and calibrates
+it first fits the vote's switch cost (:func:`fit_switch_cost`), then its null prior and rigid-partner evidence together
+(:func:`fit_prior_and_partner`), and calibrates
 the decisions made with them. ``gmm`` is fitted on the first :data:`FIT_FRAMES` true frames of each take and ``nearest``
 starts from the true first frame; only the frames after those are labeled. Writes
 ``addon/mocap_autolabel/models/confidence.json``. Needs no PyTorch; rerun after retraining a model.
@@ -13,7 +14,6 @@ starts from the true first frame; only the frames after those are labeled. Write
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import os
 import sys
@@ -27,7 +27,7 @@ from mocap_autolabel.core.labelers.onnx_labeler import MODELS_DIR
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import score_labeling, segments_right
 from mocap_autolabel.core.pipeline import label_take
-from mocap_autolabel.core.synth.generate import corrupt_take, synthesize
+from mocap_autolabel.core.synth.generate import SynthConfig, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take
 from mocap_autolabel.core.temporal.confidence import (
     CALIBRATIONS,
@@ -52,7 +52,7 @@ PRIOR_COMBOS = {("set", "vote")}
 #: Per-tracklet null priors tried, nats (see ``core.temporal.voting.vote``). Per-sample priors
 #: were tried too: they help synthetic takes and hurt real hands, whose hard frames (fists) give
 #: real markers margins of about a nat per frame.
-NULL_PRIORS = (0.0, 2.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
+NULL_PRIORS = (0.0, 2.0, 4.0, 8.0, 12.0, 16.0)
 #: Switch costs tried at the vote's own cuts (evidence flips, clashes), nats; crossings stay free
 #: (they are where a capture system's swaps are; a cost there changed nothing on synthetic takes).
 SWITCH_COSTS = (0.0, 10.0, 20.0, 40.0, 60.0, 100.0, 200.0, 300.0, 500.0)
@@ -60,22 +60,30 @@ SWITCH_COSTS = (0.0, 10.0, 20.0, 40.0, 60.0, 100.0, 200.0, 300.0, 500.0)
 #: the knee the gain is flat, while a larger prior drops more real markers seen for a frame or two.
 PRIOR_TOLERANCE = 0.01
 #: Rigid-partner evidence tried, ``(inside, outside)`` nats per sample (see
-#: ``core.temporal.partners``); the best wins, without the tolerance: no value is the cautious one.
-#: On han19's takes a penalty outside the distance helped and credit inside it did not beyond a nat.
-PARTNERS = ((0.0, 0.0), (0.0, 2.0), (0.5, 2.0), (1.0, 1.0), (1.0, 2.0), (1.0, 3.0), (1.0, 4.0), (1.0, 6.0),
-            (2.0, 2.0), (2.0, 4.0), (2.0, 6.0), (3.0, 3.0))
+#: ``core.temporal.partners``), on a grid with the null prior: the two trade against each other
+#: (a penalty outside the partner's distance does part of the prior's work), and fitted one after
+#: the other they stopped 0.02 points short of the grid's best on han19.
+PARTNERS = ((0.0, 0.0), (0.0, 2.0), (1.0, 2.0), (1.0, 4.0), (1.0, 6.0), (2.0, 4.0))
+
+
+#: Thumb-on-finger contacts per minute in the validation takes (a per-take rate drawn from this):
+#: pinches and grasps, where a thumb tip reads as the finger's marker for seconds on end, are what
+#: the switch cost and the rigid partners are for; takes without them fitted those blind.
+CONTACTS_PER_MINUTE = (0.0, 10.0)
 
 
 def validation_takes(layout, takes: int, frames: int) -> list:
     """Synthetic (take, truth, true markers) triples, the first :data:`FIT_FRAMES` frames cut off
     the take: half as the generator makes them, half broken up harder. Take lengths are drawn
     log-uniformly from :data:`MIN_FRAMES` to ``frames``: a segment's length, one of the evidence
-    columns, is bounded by its take's, and users label short takes as well as long ones."""
+    columns, is bounded by its take's, and users label short takes as well as long ones. The
+    thumb touches a finger now and then (:data:`CONTACTS_PER_MINUTE`)."""
     out = []
     lengths = np.exp(np.random.default_rng(SEED0).uniform(np.log(MIN_FRAMES), np.log(max(frames, MIN_FRAMES)),
                                                            size=takes)).astype(int)
     for i, n in enumerate(lengths):
-        synth = synthesize(layout, int(n) + FIT_FRAMES, seed=SEED0 + i)
+        synth = synthesize(layout, int(n) + FIT_FRAMES, seed=SEED0 + i,
+                           config=SynthConfig(contacts_per_minute=CONTACTS_PER_MINUTE))
         if i % 2 == 0:
             take, truth = synth.take, synth.labels
         else:
@@ -91,26 +99,44 @@ def segment_outcomes(labeling, take, truth) -> np.ndarray:
     return np.column_stack([labeling.evidence, segments_right(labeling, truth, take.valid), labeling.label >= 0])
 
 
-def fit_vote_setting(data: list, layout, method: str, labelers: list, option: str, values,
-                     tolerance: float = PRIOR_TOLERANCE, **fixed) -> tuple:
-    """Fit one setting of ``method`` + vote on validation takes: ``option`` is ``"null_prior"``
-    (per tracklet), ``"switch_cost"`` (at the vote's own cuts) or ``"partner"`` (``(inside,
-    outside)`` pairs), tried at ``values``; ``fixed`` holds the other settings. Returns the
-    smallest value within ``tolerance`` points of the best share of correct instances, and that
-    share (%) for every value tried. ``labelers`` score the takes of ``data``, one each (a
-    :class:`RememberingLabeler` scores each take once for all the fits)."""
-    results = {}
-    for value in values:
-        setting = {"null_prior": (value, 0.0), "switch_cost": (0.0, value)}.get(option, value)
+def vote_shares(data: list, layout, method: str, labelers: list, grid: list[dict], **fixed) -> list[float]:
+    """The share of correct instances (%) of ``method`` + vote on validation takes with each
+    setting of ``grid`` (``label_take`` options, over ``fixed``). ``labelers`` score the takes of
+    ``data``, one each (a :class:`RememberingLabeler` scores each take once for every setting)."""
+    shares = []
+    for setting in grid:
         correct = instances = 0
         for (take, truth, _), labeler in zip(data, labelers):
             labeling = label_take(take, layout, method=method, temporal="vote", labeler=labeler, calibrate=False,
-                                  **fixed, **{option: setting})
+                                  **{**fixed, **setting})
             s = score_labeling(labeling.per_sample(), truth, take.valid, len(layout))
             correct, instances = correct + s.correct, instances + s.instances
-        results[value] = round(100.0 * correct / instances, 4)
-    best = max(results.values())
-    return min(v for v, share in results.items() if share >= best - tolerance), results
+        shares.append(round(100.0 * correct / instances, 4))
+    return shares
+
+
+def fit_switch_cost(data: list, layout, method: str, labelers: list, **fixed) -> tuple[float, dict]:
+    """The smallest switch cost of :data:`SWITCH_COSTS` within :data:`PRIOR_TOLERANCE` points of the
+    best share of correct instances, and the share (%) at each."""
+    shares = vote_shares(data, layout, method, labelers, [{"switch_cost": (0.0, v)} for v in SWITCH_COSTS], **fixed)
+    tried = dict(zip(SWITCH_COSTS, shares))
+    return min(v for v, share in tried.items() if share >= max(shares) - PRIOR_TOLERANCE), tried
+
+
+def fit_prior_and_partner(data: list, layout, method: str, labelers: list,
+                          **fixed) -> tuple[float, tuple[float, float], dict]:
+    """Null prior and partner evidence fitted together on the grid :data:`NULL_PRIORS` x
+    :data:`PARTNERS`: of the settings within :data:`PRIOR_TOLERANCE` points of the best share of
+    correct instances, the smallest prior, and at it the best partner evidence. Returns both and
+    the share (%) of every setting tried, keyed ``(prior, partner)``."""
+    grid = [(prior, partner) for prior in NULL_PRIORS for partner in PARTNERS]
+    shares = vote_shares(data, layout, method, labelers,
+                         [{"null_prior": (prior, 0.0), "partner": partner} for prior, partner in grid], **fixed)
+    tried = dict(zip(grid, shares))
+    near = [key for key, share in tried.items() if share >= max(shares) - PRIOR_TOLERANCE]
+    prior = min(key[0] for key in near)
+    partner = max((key for key in near if key[0] == prior), key=tried.get)[1]
+    return prior, partner, tried
 
 
 def shipped_layouts() -> list[str]:
@@ -125,13 +151,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=2000,
                     help="frames labeled in the longest take (default 2000; the shortest has MIN_FRAMES)")
     ap.add_argument("--only", nargs="*", help="method/temporal pairs (default: all of COMBOS)")
+    ap.add_argument("--layouts", nargs="*", help="layouts (default: every shipped one; one process each runs them "
+                                                 "side by side, each writing its own --out)")
     ap.add_argument("--out", default=CALIBRATIONS)
     args = ap.parse_args(argv)
     table = {}
     if args.only and os.path.isfile(args.out):  # recalibrate some pairs, keep the others
         with open(args.out, encoding="utf-8") as fh:
             table = json.load(fh)
-    for name in shipped_layouts():
+    for name in args.layouts or shipped_layouts():
         layout = load_layout(name)
         data = validation_takes(layout, args.takes, args.frames)
         combos = [tuple(c.split("/")) for c in args.only] if args.only else COMBOS
@@ -141,17 +169,14 @@ def main(argv: list[str] | None = None) -> int:
             labelers = [None] * len(data)
             if (method, temporal) in PRIOR_COMBOS:
                 labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
-                # The switch cost at the shipped prior and partner evidence, then the prior at that
-                # cost, then the partner evidence at both.
+                # The switch cost at the shipped prior and partner evidence, then both of those
+                # together at that cost.
                 shipped = load_null_prior(method, temporal, name, args.out)
                 shipped_partner = load_partner(method, temporal, name, args.out)
-                fit = functools.partial(fit_vote_setting, data, layout, method, labelers)
-                switch, tried["switch_cost"] = fit("switch_cost", SWITCH_COSTS, null_prior=shipped,
-                                                   partner=shipped_partner)
-                prior, tried["null_prior"] = fit("null_prior", NULL_PRIORS, switch_cost=(0.0, switch),
-                                                 partner=shipped_partner)
-                partner, tried["partner"] = fit("partner", PARTNERS, tolerance=0.0, switch_cost=(0.0, switch),
-                                                null_prior=(prior, 0.0))
+                switch, tried["switch_cost"] = fit_switch_cost(data, layout, method, labelers, null_prior=shipped,
+                                                               partner=shipped_partner)
+                prior, partner, tried["prior_partner"] = fit_prior_and_partner(data, layout, method, labelers,
+                                                                               switch_cost=(0.0, switch))
                 print(f"{name} {method}+{temporal}: switch cost {switch} nats, null prior {prior} nats per tracklet, "
                       f"partner evidence {partner}; correct % tried: {tried}", file=sys.stderr)
             for (take, truth, markers), labeler in zip(data, labelers):
@@ -170,9 +195,9 @@ def main(argv: list[str] | None = None) -> int:
             table[calibration_key(method, temporal, name)] = cal.as_dict()
             if tried:
                 table[calibration_key(method, temporal, name)].update(
-                    null_prior=[prior, 0.0], null_prior_tried={str(k): v for k, v in tried["null_prior"].items()},
-                    switch_cost=[0.0, switch], switch_cost_tried={str(k): v for k, v in tried["switch_cost"].items()},
-                    partner=list(partner), partner_tried={str(list(k)): v for k, v in tried["partner"].items()})
+                    null_prior=[prior, 0.0], switch_cost=[0.0, switch],
+                    switch_cost_tried={str(k): v for k, v in tried["switch_cost"].items()}, partner=list(partner),
+                    prior_partner_tried={f"{k[0]} {list(k[1])}": v for k, v in tried["prior_partner"].items()})
             hi = cal(evidence, labeled=labeled) >= 0.95  # as the pipeline calls it
             print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
                   f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "

@@ -29,7 +29,7 @@ from .temporal.confidence import (
     load_switch_cost,
     segment_evidence,
 )
-from .temporal.partners import partner_logp, rigid_pairs
+from .temporal.partners import partner_logp, rigid_pairs, take_distances
 from .temporal.voting import (
     LOG_FLOOR,
     Samples,
@@ -260,8 +260,9 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
         if rigid is not None and len(rigid):
             # Vote again with the evidence of rigid partners, read off the first vote's labels.
             per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
-            extra = partner_logp(points[f_idx, k_idx].astype(np.float64), samples.frame, per, len(layout), rigid,
-                                 *partner)
+            at = points[f_idx, k_idx].astype(np.float64)
+            rigid = take_distances(rigid, at, samples.frame, per, len(layout))
+            extra = partner_logp(at, samples.frame, per, len(layout), rigid, *partner)
             decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
         info.update(facts)
         first_locked = locked_at[decided.start, decided.slot]

@@ -49,6 +49,11 @@ def load_card(model_path: str | os.PathLike) -> dict:
     return card
 
 
+#: The fewest observation columns a model is run with (padding is masked out): exported graphs
+#: fix the k of their k-nearest-neighbour step (8 in ``set``).
+MIN_WIDTH = 16
+
+
 class OnnxLabeler(Labeler):
     """Scores from an ONNX model, run in batches with onnxruntime.
 
@@ -91,21 +96,24 @@ class OnnxLabeler(Labeler):
         frames, k, _ = points.shape
         out = np.zeros((frames, k, len(self.labels) + 1), dtype=np.float32)
         # Batches of frames with like numbers of observations, each cut to its own widest frame:
-        # attention costs K^2, and a take's K is its most crowded frame (1.2-1.5x faster on
-        # han2018 with Han's corruption; padding never changes a real observation's scores).
+        # a take's K is its most crowded frame (a 10,000-frame synthetic han19 take: K 23, median
+        # 19 points; 1.23x faster). Padding never changes a real observation's scores.
         mask = np.asarray(mask, dtype=bool)
         counts = mask.sum(axis=1)
         order = np.argsort(counts, kind="stable")
 
         def run(s: int) -> None:
             rows = order[s:s + self.batch]
-            width = max(1, int(counts[rows].max()))
+            width = max(int(counts[rows].max()), MIN_WIDTH)
             cols = np.argsort(~mask[rows], axis=1, kind="stable")[:, :width]  # real observations first
-            pts = np.take_along_axis(points[rows], cols[..., None], axis=1)
-            msk = np.take_along_axis(mask[rows], cols, axis=1)
+            pts = np.zeros((len(rows), width, 3), dtype=np.float32)
+            msk = np.zeros((len(rows), width), dtype=bool)
+            pts[:, :cols.shape[1]] = np.take_along_axis(points[rows], cols[..., None], axis=1)
+            msk[:, :cols.shape[1]] = np.take_along_axis(mask[rows], cols, axis=1)
             feeds, context = prepare_inputs(self.card, pts, msk)
             outputs = self.session.run(None, feeds)  # releases the GIL
-            out[rows[:, None], cols] = scores_from_outputs(self.card, outputs, context, pts, msk)
+            scores = scores_from_outputs(self.card, outputs, context, pts, msk)
+            out[rows[:, None], cols] = scores[:, :cols.shape[1]]
 
         starts = range(0, frames, self.batch)
         if self.workers > 1 and len(starts) > 1:

@@ -55,6 +55,11 @@ class SynthConfig:
     hand_size: tuple[float, float] | None = None  # (length, breadth) to fix the size
     # The back of the hand within 90 degrees of up, as performers mostly hold it (180: any way).
     motion: MotionConfig = field(default_factory=lambda: MotionConfig(max_tilt_deg=90.0))
+    # self-contact: the thumb's pad held on a finger (pinches, grasps), eased in and out over
+    # 0.15 s; per-take rate drawn from this (off by default: the shipped models and benchmarks
+    # were made without it)
+    contacts_per_minute: tuple[float, float] = (0.0, 0.0)
+    contact_s: tuple[float, float] = (0.5, 3.0)
     # noise and slip
     noise_sd: tuple[float, float] = (0.0005, 0.0015)  # per-take SD drawn from this range
     slip: tuple[float, float] = (0.002, 0.003)  # per-take, per-marker offset along the skin
@@ -130,6 +135,8 @@ def synthesize(layout: Layout, frames: int, seed: int = 0, config: SynthConfig |
     hand = HandModel(length=length, breadth=breadth, side=side)
 
     poses = generate_motion(rng, frames, cfg.rate, cfg.motion)
+    if cfg.contacts_per_minute[1] > 0:  # its own random stream: takes without contacts stay as they were
+        add_contacts(np.random.default_rng([seed, 1]), hand, poses, cfg.rate, cfg.contacts_per_minute, cfg.contact_s)
     binding, normals = layout.place(hand)
     binding = _slip(rng, binding, normals, cfg.slip)
     skin_r, skin_t = (a.astype(np.float32) for a in hand.skinning_transforms(poses))  # float32: speed
@@ -404,6 +411,37 @@ def marker_motion(layout: Layout, hand: HandModel, frames: int, seed: int, noise
         binding = binding.moved(offsets)
     markers = blend(*hand.skinning_transforms(poses), binding)
     return poses, markers + rng.normal(0.0, noise, markers.shape) if noise > 0 else markers
+
+
+def add_contacts(rng: np.random.Generator, hand: HandModel, poses: np.ndarray, rate: float,
+                 per_minute: tuple[float, float], duration_s: tuple[float, float]) -> list[tuple[int, int, str]]:
+    """Bend ``poses (F, 26)`` in place so that the thumb's pad rests on a finger for a while: on
+    the distal or middle phalanx of the index, middle, ring or little finger, palmar or on its
+    thumb side, eased in and out over 0.15 s. A thumb tip held on a finger reads frame after
+    frame as that finger's marker; real takes are full of such pinches and grasps.
+
+    Returns ``(start, stop, finger)`` of each contact.
+    """
+    from .motion import min_jerk
+
+    frames = len(poses)
+    count = rng.poisson(rng.uniform(*per_minute) * frames / rate / 60.0)
+    ease = max(1.0, 0.15 * rate)
+    out = []
+    for _ in range(count):
+        length = max(2, int(rng.uniform(*duration_s) * rate))
+        start = int(rng.integers(0, max(1, frames - length)))
+        idx = np.arange(start, min(frames, start + length))
+        finger = str(rng.choice(["index", "middle", "ring", "little"]))
+        bone = str(rng.choice(["dist", "mid"]))
+        along, angle = rng.uniform(0.3, 0.9), rng.uniform(np.pi / 2, np.pi)
+        key = np.unique(np.append(idx[::4], idx[-1]))  # solved every 4th frame, interpolated between
+        bent = touch(hand, poses[key], finger, bone, along, angle, steps=15)[0]
+        full = np.stack([np.interp(idx, key, bent[:, d]) for d in range(6, poses.shape[1])], axis=1)
+        w = min_jerk(np.clip(np.minimum(idx - start + 1, idx[-1] - idx + 1) / ease, 0.0, 1.0))[:, None]
+        poses[idx, 6:] = (1.0 - w) * poses[idx, 6:] + w * full
+        out.append((int(idx[0]), int(idx[-1]) + 1, finger))
+    return out
 
 
 def pinch(hand: HandModel, pose: np.ndarray, finger: str, steps: int = 40) -> np.ndarray:

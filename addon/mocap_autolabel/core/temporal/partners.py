@@ -8,7 +8,9 @@ null, although its distance to the labeled ``ThumbIP`` never changes. A ghost ke
 distance for a frame or two at most. Once the vote has labeled the take, every sample earns
 evidence for each label whose rigid partner is labeled in its frame: ``inside`` nats where its
 distance to that partner is within the tolerance of the pair's distance, ``-outside`` where it
-is not. The vote is then run again with that evidence added.
+is not. The vote is then run again with that evidence added. A pair's distance is the take's own where
+the first vote labeled both markers in enough frames (gloves and hands differ from the average
+hand: the han2018 glove's thumb tip sits 11-20 mm off its nominal spot), else the average hand's.
 """
 
 from __future__ import annotations
@@ -24,13 +26,18 @@ from ..layout import Layout
 from ..synth.poses import sample_joint_angles
 
 #: A pair is rigid when its distance varies less than this over random poses (metres, SD): the
-#: markers of one bone, and han19's ThumbIP and ThumbTip (1.1 mm: ThumbIP sits at the IP joint);
-#: the next pairs vary by 2.4 mm and more (a finger's PIP and tip markers across the DIP joint).
-RIGID_SD = 0.0015
+#: markers of one bone, han19's ThumbIP and ThumbTip (1.1 mm: ThumbIP sits at the IP joint), and
+#: pairs across one joint whose angle is tied to its neighbour's (a finger's PIP and tip markers
+#: across the DIP joint, 2.4 mm): within the tolerance at 2 SD. han19 has 17 such pairs, glove13 6.
+#: (1.5 mm, the bone pairs alone, labeled 0.02 points fewer instances right on synthetic takes.)
+RIGID_SD = 0.003
 #: Tolerance on a rigid pair's distance: this much plus :data:`TOLERANCE_SHARE` of the distance
 #: (hands differ in size by about 10 %, skin and glove slip by millimetres).
 TOLERANCE = 0.004
 TOLERANCE_SHARE = 0.15
+#: Frames in which the first vote labeled both markers of a pair before the take's own distance
+#: replaces the average hand's (a median over them: a few mislabeled frames do not move it).
+OWN_FRAMES = 30
 
 
 @dataclass(frozen=True)
@@ -68,6 +75,29 @@ def rigid_pairs(layout: Layout, poses: int = 256, seed: int = 0) -> RigidPairs:
     return RigidPairs(np.stack([i, j], axis=1).astype(np.int64), dist, TOLERANCE + TOLERANCE_SHARE * dist)
 
 
+def take_distances(rigid: RigidPairs, positions: np.ndarray, frame: np.ndarray, label: np.ndarray,
+                   n_labels: int, min_frames: int = OWN_FRAMES) -> RigidPairs:
+    """``rigid`` with the take's own distance for each pair labeled together in at least
+    ``min_frames`` frames (the median, metres), arguments as in :func:`partner_logp`."""
+    if not len(rigid) or not len(frame):
+        return rigid
+    holder = _holders(frame, label, n_labels)
+    dist = rigid.distance.copy()
+    for r, (a, b) in enumerate(rigid.pairs):
+        both = np.flatnonzero((holder[:, a] >= 0) & (holder[:, b] >= 0))
+        if len(both) >= min_frames:
+            dist[r] = np.median(np.linalg.norm(positions[holder[both, a]] - positions[holder[both, b]], axis=1))
+    return RigidPairs(rigid.pairs, dist, TOLERANCE + TOLERANCE_SHARE * dist)
+
+
+def _holders(frame: np.ndarray, label: np.ndarray, n_labels: int) -> np.ndarray:
+    """int ``(F, M)``: the sample that holds each label in each frame, -1 where none does."""
+    holder = np.full((int(frame.max()) + 1, n_labels), -1, dtype=np.int64)
+    held = np.flatnonzero(label >= 0)
+    holder[frame[held], label[held]] = held
+    return holder
+
+
 def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_labels: int,
                  rigid: RigidPairs, inside: float, outside: float) -> np.ndarray:
     """Evidence ``(n, M + 1)`` nats of each sample for each label from its rigid partners.
@@ -87,10 +117,7 @@ def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_
     out = np.zeros((n, n_labels + 1), dtype=np.float32)
     if not len(rigid) or not n or (inside == 0 and outside == 0):
         return out
-    # The sample that holds each label in each frame, -1 where none does.
-    holder = np.full((int(frame.max()) + 1, n_labels), -1, dtype=np.int64)
-    held = np.flatnonzero(label >= 0)
-    holder[frame[held], label[held]] = held
+    holder = _holders(frame, label, n_labels)
     for b in np.unique(rigid.pairs[:, 1]):
         partner = holder[frame, b]
         seen = np.flatnonzero((partner >= 0) & (label != b))
