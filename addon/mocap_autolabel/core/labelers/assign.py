@@ -38,7 +38,8 @@ def assign_frame(scores: np.ndarray) -> np.ndarray:
     return out
 
 
-def assign(scores: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def assign(scores: np.ndarray, mask: np.ndarray,
+           probabilities: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Turn per-frame scores into labels and confidences.
 
     Frames whose row-wise best labels already form a one-to-one labeling take them directly
@@ -47,13 +48,14 @@ def assign(scores: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray
     Args:
         scores: ``(F, K, M + 1)`` log-domain scores (see :meth:`Labeler.scores`).
         mask: bool ``(F, K)``.
+        probabilities: ``row_probabilities(scores[mask])`` where the caller has them already.
 
     Returns:
         labels: int16 ``(F, K)``: label index, :data:`NULL` for null and for padding.
         confidence: float32 ``(F, K)`` in [0, 1]: the softmax probability of the given label
         (null included) within the observation's row; 0 for padding.
     """
-    scores = np.asarray(scores, dtype=np.float64)
+    scores = np.asarray(scores)
     frames, k, m1 = scores.shape
     m = m1 - 1
     best = np.argmax(scores, axis=2)
@@ -64,10 +66,10 @@ def assign(scores: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray
     labels = np.where(best == m, NULL, best)
     for f in np.flatnonzero(conflict):
         rows = np.flatnonzero(mask[f])
-        labels[f, rows] = assign_frame(scores[f, rows])
+        labels[f, rows] = assign_frame(scores[f, rows].astype(np.float64))
     labels[~mask] = NULL
     confidence = np.zeros((frames, k), dtype=np.float32)
-    rows = row_probabilities(scores[mask])  # real observations only
+    rows = row_probabilities(scores[mask].astype(np.float64)) if probabilities is None else probabilities
     column = np.where(labels[mask] == NULL, m, labels[mask])
     confidence[mask] = rows[np.arange(len(rows)), column]
     return labels.astype(np.int16), confidence

@@ -114,9 +114,20 @@ def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_
         float32 ``(n, M + 1)``; the null column is 0.
     """
     n = len(frame)
-    out = np.zeros((n, n_labels + 1), dtype=np.float32)
+    out = np.zeros((n_labels + 1, n), dtype=np.float32)  # label-major: each label's row is added to whole
     if not len(rigid) or not n or (inside == 0 and outside == 0):
-        return out
+        return out.T
+    holder = _holders(frame, label, n_labels)
+    positions = np.asarray(positions, dtype=np.float32)  # millimetre tolerances: float32 is ample
+    for b in np.unique(rigid.pairs[:, 1]):
+        partner = holder[frame, b]
+        seen = np.flatnonzero((partner >= 0) & (label != b))
+        diff = positions[seen] - positions[partner[seen]]
+        d = np.sqrt(np.einsum("ij,ij->i", diff, diff))  # once for every label paired with b
+        for r in np.flatnonzero(rigid.pairs[:, 1] == b):
+            out[rigid.pairs[r, 0], seen] += np.where(np.abs(d - rigid.distance[r]) <= rigid.tolerance[r],
+                                                     inside, -outside)
+    return out.T
     holder = _holders(frame, label, n_labels)
     for b in np.unique(rigid.pairs[:, 1]):
         partner = holder[frame, b]
