@@ -220,8 +220,8 @@ def write_report(results: dict, reliability: dict, speed: dict) -> None:
     for name, seg in reliability.items():
         hi = seg[:, 0] >= 0.95
         lines.append(f"| {name} | {len(seg):,} | {100 * hi.mean():.1f} % | "
-                     f"{100 * seg[hi, 1].mean() if hi.any() else float('nan'):.3f} | "
-                     f"{100 * seg[~hi, 1].mean() if (~hi).any() else float('nan'):.2f} |")
+                     f"{f'{100 * seg[hi, 1].mean():.3f}' if hi.any() else 'none there'} | "
+                     f"{f'{100 * seg[~hi, 1].mean():.2f}' if (~hi).any() else 'none there'} |")
     lines += ["", "![reliability](temporal_reliability.png)", "",
               "## Speed of the `label` CLI (han19, 10,000 frames, Blender not involved)", "",
               f"- end to end (process start, read C3D, score, vote, write C3D): {speed['wall_s']:.2f} s, "
