@@ -151,14 +151,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=2000,
                     help="frames labeled in the longest take (default 2000; the shortest has MIN_FRAMES)")
     ap.add_argument("--only", nargs="*", help="method/temporal pairs (default: all of COMBOS)")
-    ap.add_argument("--layouts", nargs="*", help="layouts (default: every shipped one; one process each runs them "
-                                                 "side by side, each writing its own --out)")
+    ap.add_argument("--layouts", nargs="*", help="layouts (default: every shipped one; one process per layout "
+                                                 "runs them side by side into the same --out)")
     ap.add_argument("--out", default=CALIBRATIONS)
     args = ap.parse_args(argv)
-    table = {}
-    if args.only and os.path.isfile(args.out):  # recalibrate some pairs, keep the others
-        with open(args.out, encoding="utf-8") as fh:
-            table = json.load(fh)
+    table = {}  # the calibrations made by this run
     for name in args.layouts or shipped_layouts():
         layout = load_layout(name)
         data = validation_takes(layout, args.takes, args.frames)
@@ -202,6 +199,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
                   f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "
                   "right", file=sys.stderr)
+    if (args.only or args.layouts) and os.path.isfile(args.out):
+        # Recalibrate some pairs or layouts, keep the others: read as the file is now, so that a
+        # run for another layout that finished meanwhile keeps its results.
+        with open(args.out, encoding="utf-8") as fh:
+            table = {**json.load(fh), **table}
     with atomic_output(args.out) as tmp, open(tmp, "w", encoding="utf-8") as fh:
         json.dump(table, fh, indent=1, sort_keys=True)
     print(f"wrote {args.out}", file=sys.stderr)

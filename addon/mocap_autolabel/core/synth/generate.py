@@ -34,7 +34,7 @@ from .corrupt import (
     occluder_spheres,
     persistent_ghosts,
 )
-from .motion import MotionConfig, generate_motion
+from .motion import MotionConfig, generate_motion, min_jerk
 from .poses import CANONICAL_POSES
 
 GHOST = -1  #: truth label of a ghost sample
@@ -422,8 +422,6 @@ def add_contacts(rng: np.random.Generator, hand: HandModel, poses: np.ndarray, r
 
     Returns ``(start, stop, finger)`` of each contact.
     """
-    from .motion import min_jerk
-
     frames = len(poses)
     count = rng.poisson(rng.uniform(*per_minute) * frames / rate / 60.0)
     ease = max(1.0, 0.15 * rate)

@@ -128,12 +128,3 @@ def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_
             out[rigid.pairs[r, 0], seen] += np.where(np.abs(d - rigid.distance[r]) <= rigid.tolerance[r],
                                                      inside, -outside)
     return out.T
-    holder = _holders(frame, label, n_labels)
-    for b in np.unique(rigid.pairs[:, 1]):
-        partner = holder[frame, b]
-        seen = np.flatnonzero((partner >= 0) & (label != b))
-        d = np.linalg.norm(positions[seen] - positions[partner[seen]], axis=1)  # once for every label paired with b
-        for r in np.flatnonzero(rigid.pairs[:, 1] == b):
-            at = np.abs(d - rigid.distance[r]) <= rigid.tolerance[r]
-            out[seen, rigid.pairs[r, 0]] += np.where(at, inside, -outside)
-    return out
