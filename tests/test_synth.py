@@ -213,18 +213,18 @@ def test_bone_scale_changes_proportions_only_where_asked():
 
 def test_misplacement_moves_finger_markers_towards_the_middle_of_the_hand():
     from mocap_autolabel.core.hand.skeleton import BONE_NAMES
-    from mocap_autolabel.core.synth.frames import _misplacement
+    from mocap_autolabel.core.synth.generate import misplacement
 
     layout = load_layout("han19")
     for side in ("left", "right"):
         hand = HandModel(side=side)
         binding = layout.place(hand)[0]
-        assert not _misplacement(np.random.default_rng(0), binding, hand, 0.0, 0.0).any()
+        assert not misplacement(np.random.default_rng(0), binding, hand, 0.0, 0.0).any()
         bone = np.array(BONE_NAMES)[binding.bones[:, 0]]
         little, index = layout.names.index("PinkyTip"), layout.names.index("IndexTip")
         shifts = []
         for seed in range(200):
-            off = _misplacement(np.random.default_rng(seed), binding, hand, 0.0, 0.02)
+            off = misplacement(np.random.default_rng(seed), binding, hand, 0.0, 0.02)
             moved = np.flatnonzero(np.abs(off).sum(axis=1) > 0)
             fingers = ("index", "middle", "ring", "little")
             assert set(bone[moved]) <= {f"{f}_{s}" for f in fingers for s in ("mid", "dist")}
@@ -233,11 +233,25 @@ def test_misplacement_moves_finger_markers_towards_the_middle_of_the_hand():
             assert np.sign(x[little]) == -np.sign(x[index]) or x[little] == 0
             shifts.append(x[little])
         assert -0.005 - 1e-9 <= min(shifts) and max(shifts) <= 0.02 + 1e-9 and np.mean(shifts) > 0.005
-        spread = np.std([_misplacement(np.random.default_rng(s), binding, hand, 0.003, 0.0) for s in range(300)],
+        spread = np.std([misplacement(np.random.default_rng(s), binding, hand, 0.003, 0.0) for s in range(300)],
                         axis=0)
         distal = np.char.endswith(bone, "_dist")
         assert spread[distal].mean() == pytest.approx(0.006, rel=0.1)
         assert spread[~distal].mean() == pytest.approx(0.003, rel=0.1)
+
+
+def test_misplaced_takes_move_the_markers_and_nothing_else_about_the_hand():
+    layout = load_layout("han19")
+    plain = synthesize(layout, 120, seed=3)
+    again = synthesize(layout, 120, seed=3, config=SynthConfig(placement_sd=0.0, tip_convergence=0.0))
+    moved = synthesize(layout, 120, seed=3, config=SynthConfig(placement_sd=0.003, tip_convergence=0.018))
+    assert np.array_equal(plain.markers, again.markers)  # off: the take as it always was
+    assert np.array_equal(plain.poses, moved.poses) and plain.hand == moved.hand
+    shift = np.linalg.norm(moved.markers - plain.markers, axis=2)  # (F, M)
+    assert np.all(shift > 0) and 0.002 < shift.mean() < 0.02  # every marker off its spot, by millimetres
+    # A misplacement is fixed on the hand: the offset between the two takes' markers of one bone
+    # is the same rigid motion in every frame, so its size does not change.
+    assert np.ptp(shift[:, layout.names.index("BackHand1")]) < 1e-9
 
 
 @pytest.mark.parametrize("side", ["left", "right"])

@@ -459,6 +459,45 @@ def test_calibration_takes_vary_in_length_and_keep_their_truth():
         assert truth.shape == take.positions.shape[:2] and len(markers) == take.n_frames + FIT_FRAMES
 
 
+def test_calibration_takes_wear_the_glove_their_model_was_trained_for():
+    import json
+
+    from mocap_autolabel.core.labelers.onnx_labeler import MODELS_DIR
+
+    from training.confidence import glove_placement
+
+    frames = json.load(open(f"{MODELS_DIR}/set_han19.json"))["training"]["recipe"]["frames"]
+    assert glove_placement(load_layout("han19")) == {"placement_sd": frames["placement_sd"],
+                                                     "tip_convergence": frames["tip_convergence"]}
+    assert frames["placement_sd"] > 0 and frames["tip_convergence"] > 0
+    assert glove_placement(load_layout("glove13")) == {"placement_sd": 0.0, "tip_convergence": 0.0}
+    assert glove_placement(load_layout("tips5")) == {"placement_sd": 0.0, "tip_convergence": 0.0}  # no model
+
+
+def test_vote_settings_are_refitted_until_the_switch_cost_is_stable(monkeypatch):
+    import training.confidence as fit
+
+    # A made-up share surface: the best switch cost is 500 below a prior of 4 nats and 300 above;
+    # the best prior is 8 and the best partner evidence (1, 4), whatever the rest (the prior's
+    # term outweighs a switch cost fitted at another prior).
+    def shares(data, layout, method, labelers, grid, **fixed):
+        out = []
+        for setting in grid:
+            s = {**fixed, **setting}
+            target = 500.0 if s["null_prior"][0] < 4 else 300.0
+            inside, outside = s["partner"]
+            out.append(99.0 - abs(s["switch_cost"][1] - target) / 100 - abs(s["null_prior"][0] - 8)
+                       - (abs(inside - 1) + abs(outside - 4)) / 10)
+        return out
+
+    monkeypatch.setattr(fit, "vote_shares", shares)
+    switch, prior, partner, tried = fit.fit_vote_settings([], None, "set", [], 0.0, (0.0, 0.0))
+    # Fitted once, the switch cost would have stayed at 500 (chosen at the starting prior of 0).
+    assert (switch, prior, partner) == (300.0, 8.0, (1.0, 4.0))
+    assert set(tried) == {"switch_cost", "prior_partner"}
+    assert max(tried["switch_cost"], key=tried["switch_cost"].get) == 300.0
+
+
 def test_empty_and_ghost_flooded_takes(han19, synth_take):
     empty = Take(positions=np.full((10, 3, 3), np.nan, dtype=np.float32), names=["*0", "*1", "*2"], rate=100.0,
                  source="empty.c3d")

@@ -15,7 +15,7 @@ from ..hand.skeleton import BONE_NAMES, DOF_INDEX, FINGERS, N_DOF, HandModel, sa
 from ..hand.skin import blend
 from ..layout import Layout
 from ..rotations import random_rotations
-from .generate import EMPTY, GHOST, _slip
+from .generate import EMPTY, GHOST, _slip, misplacement
 from .poses import sample_joint_angles, widened_limits
 
 
@@ -85,7 +85,7 @@ def hand_frames(layout: Layout, n: int, rng: np.random.Generator, cfg: FrameConf
         hand = HandModel(length=length, breadth=breadth, side=side, bone_scale=scale)
         binding, normals = layout.place(hand)
         binding = _slip(rng, binding, normals, cfg.slip)
-        binding = binding.moved(_misplacement(rng, binding, hand, cfg.placement_sd, cfg.tip_convergence))
+        binding = binding.moved(misplacement(rng, binding, hand, cfg.placement_sd, cfg.tip_convergence))
         pose = np.zeros((len(rows), N_DOF))
         pose[:, 6:] = sample_joint_angles(rng, len(rows), margin_deg=cfg.range_margin_deg)
         lo, hi = widened_limits(cfg.range_margin_deg)
@@ -97,26 +97,6 @@ def hand_frames(layout: Layout, n: int, rng: np.random.Generator, cfg: FrameConf
                 pose[:, a] = np.clip(pose[:, a] + c[i] * flex, lo[a - 6], hi[a - 6])
         r, t = hand.skinning_transforms(pose)
         out[rows] = blend(r, t, binding)
-    return out
-
-
-#: Sideways shift of each finger's markers (index to little) per unit of ``tip_convergence``,
-#: towards the thumb: the fingertips close in on a point between the index and the middle finger.
-_CONVERGENCE = {"index": -0.5, "middle": 0.3, "ring": 0.65, "little": 1.0}
-
-
-def _misplacement(rng: np.random.Generator, binding, hand: HandModel, sd: float, convergence: float) -> np.ndarray:
-    """Rest-frame offsets ``(M, 3)`` metres of one hand's markers (see ``FrameConfig.placement_sd``)."""
-    out = np.zeros_like(binding.rest)
-    if sd <= 0 and convergence <= 0:
-        return out
-    bone = np.array(BONE_NAMES)[binding.bones[:, 0]]
-    distal = np.char.endswith(bone, "_dist")
-    out += sd * rng.standard_normal(out.shape) * np.where(distal, 2.0, 1.0)[:, None]
-    level = rng.uniform(-0.25, 1.0) * convergence
-    for f, w in _CONVERGENCE.items():
-        share = np.where(bone == f"{f}_dist", 1.0, np.where(bone == f"{f}_mid", 0.5, 0.0))
-        out[:, 0] += hand.thumb_side * w * level * share
     return out
 
 

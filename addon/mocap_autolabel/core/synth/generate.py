@@ -19,7 +19,7 @@ import numpy as np
 
 from ..atomic import atomic_output
 from ..formats.c3d import write_c3d
-from ..hand.skeleton import HandModel, sample_hand_size
+from ..hand.skeleton import BONE_NAMES, HandModel, sample_hand_size
 from ..hand.skin import Binding, blend, blend_directions
 from ..layout import Layout
 from ..take import Take
@@ -60,6 +60,11 @@ class SynthConfig:
     # were made without it)
     contacts_per_minute: tuple[float, float] = (0.0, 0.0)
     contact_s: tuple[float, float] = (0.5, 3.0)
+    # marker misplacement, per take (see :func:`misplacement`): the glove's markers sit off the
+    # layout's spots. Off by default; drawn from its own random stream, so that switching it on
+    # changes nothing else about a take.
+    placement_sd: float = 0.0
+    tip_convergence: float = 0.0
     # noise and slip
     noise_sd: tuple[float, float] = (0.0005, 0.0015)  # per-take SD drawn from this range
     slip: tuple[float, float] = (0.002, 0.003)  # per-take, per-marker offset along the skin
@@ -139,6 +144,9 @@ def synthesize(layout: Layout, frames: int, seed: int = 0, config: SynthConfig |
         add_contacts(np.random.default_rng([seed, 1]), hand, poses, cfg.rate, cfg.contacts_per_minute, cfg.contact_s)
     binding, normals = layout.place(hand)
     binding = _slip(rng, binding, normals, cfg.slip)
+    if cfg.placement_sd > 0 or cfg.tip_convergence > 0:
+        binding = binding.moved(misplacement(np.random.default_rng([seed, 2]), binding, hand, cfg.placement_sd,
+                                             cfg.tip_convergence))
     skin_r, skin_t = (a.astype(np.float32) for a in hand.skinning_transforms(poses))  # float32: speed
     markers = blend(skin_r, skin_t, binding).astype(np.float64)  # (F, M, 3)
     n_markers = markers.shape[1]
@@ -189,6 +197,31 @@ def synthesize(layout: Layout, frames: int, seed: int = 0, config: SynthConfig |
     take = Take(positions=positions, names=[f"*{i}" for i in range(positions.shape[1])], rate=cfg.rate,
                 first_frame=1, source_units="m", vendor="mocap_autolabel synth")
     return SynthTake(take, labels, layout, hand, poses, markers, seed, cfg)
+
+
+#: Sideways shift of each finger's markers (index to little) per unit of ``tip_convergence``,
+#: towards the thumb: the fingertips close in on a point between the index and the middle finger.
+_CONVERGENCE = {"index": -0.5, "middle": 0.3, "ring": 0.65, "little": 1.0}
+
+
+def misplacement(rng: np.random.Generator, binding: Binding, hand: HandModel, sd: float,
+                 convergence: float) -> np.ndarray:
+    """Rest-frame offsets ``(M, 3)`` metres of one hand's markers: each moved by a Gaussian offset of
+    ``sd`` per axis (doubled on the distal phalanges), and the finger markers moved sideways towards
+    the middle of the hand by up to ``convergence`` at the little fingertip (less on the other
+    fingers, half on the middle phalanges). Glove markers sit where the glove sits, not where the
+    layout says, and the fingertips of real hands and gloves bunch together, most visibly in a fist."""
+    out = np.zeros_like(binding.rest)
+    if sd <= 0 and convergence <= 0:
+        return out
+    bone = np.array(BONE_NAMES)[binding.bones[:, 0]]
+    distal = np.char.endswith(bone, "_dist")
+    out += sd * rng.standard_normal(out.shape) * np.where(distal, 2.0, 1.0)[:, None]
+    level = rng.uniform(-0.25, 1.0) * convergence
+    for f, w in _CONVERGENCE.items():
+        share = np.where(bone == f"{f}_dist", 1.0, np.where(bone == f"{f}_mid", 0.5, 0.0))
+        out[:, 0] += hand.thumb_side * w * level * share
+    return out
 
 
 def _slip(rng: np.random.Generator, binding: Binding, normals: np.ndarray, slip: tuple[float, float]) -> Binding:
