@@ -460,13 +460,11 @@ def test_calibration_takes_vary_in_length_and_keep_their_truth():
 
 
 def test_calibration_takes_wear_the_glove_their_model_was_trained_for():
-    import json
-
-    from mocap_autolabel.core.labelers.onnx_labeler import MODELS_DIR
+    from mocap_autolabel.core.labelers.onnx_labeler import load_card, shipped_model
 
     from training.confidence import glove_placement
 
-    frames = json.load(open(f"{MODELS_DIR}/set_han19.json"))["training"]["recipe"]["frames"]
+    frames = load_card(shipped_model("set", "han19"))["training"]["recipe"]["frames"]
     assert glove_placement(load_layout("han19")) == {"placement_sd": frames["placement_sd"],
                                                      "tip_convergence": frames["tip_convergence"]}
     assert frames["placement_sd"] > 0 and frames["tip_convergence"] > 0

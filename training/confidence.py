@@ -23,7 +23,7 @@ from mocap_autolabel.core.atomic import atomic_output
 from mocap_autolabel.core.labelers import make_labeler
 from mocap_autolabel.core.labelers.base import RememberingLabeler
 from mocap_autolabel.core.labelers.gmm import GmmLabeler
-from mocap_autolabel.core.labelers.onnx_labeler import MODELS_DIR
+from mocap_autolabel.core.labelers.onnx_labeler import MODELS_DIR, load_card, shipped_model
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import score_labeling, segments_right
 from mocap_autolabel.core.pipeline import label_take
@@ -77,11 +77,8 @@ def glove_placement(layout) -> dict:
     recipe), as ``SynthConfig`` fields: the validation takes' markers sit off their spots as the
     model's training hands' did (han19's glove: 3 mm SD, tips drawn together by up to 18 mm;
     nominal where the card names none)."""
-    card = os.path.join(MODELS_DIR, f"set_{layout.name}.json")
-    frames = {}
-    if os.path.isfile(card):
-        with open(card, encoding="utf-8") as fh:
-            frames = json.load(fh).get("training", {}).get("recipe", {}).get("frames", {})
+    model = shipped_model("set", layout.name)
+    frames = load_card(model).get("training", {}).get("recipe", {}).get("frames", {}) if os.path.isfile(model) else {}
     return {"placement_sd": frames.get("placement_sd", 0.0), "tip_convergence": frames.get("tip_convergence", 0.0)}
 
 

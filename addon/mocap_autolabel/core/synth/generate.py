@@ -144,9 +144,8 @@ def synthesize(layout: Layout, frames: int, seed: int = 0, config: SynthConfig |
         add_contacts(np.random.default_rng([seed, 1]), hand, poses, cfg.rate, cfg.contacts_per_minute, cfg.contact_s)
     binding, normals = layout.place(hand)
     binding = _slip(rng, binding, normals, cfg.slip)
-    if cfg.placement_sd > 0 or cfg.tip_convergence > 0:
-        binding = binding.moved(misplacement(np.random.default_rng([seed, 2]), binding, hand, cfg.placement_sd,
-                                             cfg.tip_convergence))
+    binding = binding.moved(misplacement(np.random.default_rng([seed, 2]), binding, hand, cfg.placement_sd,
+                                         cfg.tip_convergence))  # zeros when off
     skin_r, skin_t = (a.astype(np.float32) for a in hand.skinning_transforms(poses))  # float32: speed
     markers = blend(skin_r, skin_t, binding).astype(np.float64)  # (F, M, 3)
     n_markers = markers.shape[1]
