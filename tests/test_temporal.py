@@ -476,24 +476,26 @@ def test_vote_settings_are_refitted_until_the_switch_cost_is_stable(monkeypatch)
     import training.confidence as fit
 
     # A made-up share surface: the best switch cost is 500 below a prior of 4 nats and 300 above;
-    # the best prior is 8 and the best partner evidence (1, 4), whatever the rest (the prior's
-    # term outweighs a switch cost fitted at another prior).
+    # the best prior is 8, the best partner evidence (1, 4) and the best continuity (0, 4),
+    # whatever the rest (the prior's term outweighs a switch cost fitted at another prior).
     def shares(data, layout, method, labelers, grid, **fixed):
         out = []
         for setting in grid:
-            s = {**fixed, **setting}
+            s = {"continuity": (0.0, 0.0), **fixed, **setting}
             target = 500.0 if s["null_prior"][0] < 4 else 300.0
             inside, outside = s["partner"]
             out.append(99.0 - abs(s["switch_cost"][1] - target) / 100 - abs(s["null_prior"][0] - 8)
-                       - (abs(inside - 1) + abs(outside - 4)) / 10)
+                       - (abs(inside - 1) + abs(outside - 4)) / 10 - abs(s["continuity"][1] - 4) / 10)
         return out
 
     monkeypatch.setattr(fit, "vote_shares", shares)
-    switch, prior, partner, tried = fit.fit_vote_settings([], None, "set", [], 0.0, (0.0, 0.0))
+    switch, prior, partner, continuity, tried = fit.fit_vote_settings([], None, "set", [], 0.0, (0.0, 0.0),
+                                                                      (0.0, 0.0))
     # Fitted once, the switch cost would have stayed at 500 (chosen at the starting prior of 0).
-    assert (switch, prior, partner) == (300.0, 8.0, (1.0, 4.0))
-    assert set(tried) == {"switch_cost", "prior_partner"}
+    assert (switch, prior, partner, continuity) == (300.0, 8.0, (1.0, 4.0), (0.0, 4.0))
+    assert set(tried) == {"switch_cost", "prior_partner", "continuity"}
     assert max(tried["switch_cost"], key=tried["switch_cost"].get) == 300.0
+    assert max(tried["continuity"], key=tried["continuity"].get) == (0.0, 4.0)
 
 
 def test_empty_and_ghost_flooded_takes(han19, synth_take):
@@ -614,3 +616,53 @@ def test_a_thumb_tip_read_as_null_is_labeled_at_its_rigid_distance_from_thumb_ip
     assert set(with_partner.per_sample()[:, slot].tolist()) == {tip}
     assert with_partner.info["partner"] == [2.0, 2.0]
     assert _accuracy(with_partner, s.take, s.labels) == 1.0
+
+
+def _continuity_case(gap: int = 5, held: int = 30):
+    """Three labels moving together at 0.2 m/s on slots 2-4; label 0 on slot 0 until frame 30,
+    hidden for ``gap`` frames, then back on slot 1 where the motion carries it, while a ghost on
+    slot 5 flickers up 3 cm away. Returns the continuity_logp arguments (100 Hz)."""
+    from mocap_autolabel.core.temporal.voting import Segments
+
+    rate, back = 100.0, 30 + gap
+    frames = back + 60
+    t = np.arange(frames)[:, None] / rate * np.array([0.2, 0.0, 0.0])
+    home = np.array([[0.0, 0, 0], [0.02, 0, 0], [0, 0.02, 0], [0, 0, 0.02]])
+    rows = [(f, 0, 0, t[f] + home[0]) for f in range(30)]
+    rows += [(f, 1, -1, t[f] + home[0]) for f in range(back, frames)]
+    rows += [(f, 1 + k, k, t[f] + home[k]) for k in (1, 2, 3) for f in range(frames)]
+    rows += [(f, 5, -1, t[f] + home[0] + [0, 0, 0.03]) for f in range(back, frames)]
+    rows.sort(key=lambda r: (r[1], r[0]))
+    frame = np.array([r[0] for r in rows])
+    slot = np.array([r[1] for r in rows])
+    label = np.array([r[2] for r in rows])
+    positions = np.array([r[3] for r in rows])
+    held_for = np.where(slot == 0, held, frames)
+    tracklets = Segments(np.array([0, 1, 2, 3, 4, 5]), np.array([0, back, 0, 0, 0, back]),
+                         np.array([30, frames, frames, frames, frames, frames]))
+    return (positions, frame, slot, label, held_for, tracklets, 4, rate), frame, slot
+
+
+def test_continuity_favours_the_trajectory_that_continues_a_hidden_marker():
+    from mocap_autolabel.core.temporal.continuity import WINDOW, continuity_logp
+
+    args, frame, slot = _continuity_case()
+    logp = continuity_logp(*args, inside=1.0, outside=4.0)
+    assert logp.shape == (len(frame), 5) and (logp[:, 4] == 0).all()
+    start = (slot == 1) & (frame < 35 + WINDOW)
+    assert (logp[start, 0] == 1.0).all()  # the marker back where its neighbours carried it
+    assert (logp[(slot == 5) & (frame < 35 + WINDOW), 0] == -4.0).all()  # the ghost 3 cm off
+    assert (logp[(slot == 1) & (frame >= 35 + WINDOW), 0] == 0).all()  # only the ends earn it
+    # Labels held by their own trajectories across no gap are left alone.
+    assert (logp[np.isin(slot, [2, 3, 4]), 1:4] == 0).all()
+
+
+@pytest.mark.parametrize("case", [{"held": 5}, {"gap": 60}])
+def test_continuity_needs_a_held_anchor_and_a_short_gap(case):
+    from mocap_autolabel.core.temporal.continuity import continuity_logp
+
+    args, frame, slot = _continuity_case(**case)
+    # An anchor held a few frames (a ghost the first vote labeled) or a gap longer than
+    # MAX_GAP_S says nothing.
+    assert (continuity_logp(*args, inside=1.0, outside=4.0)[:, 0] == 0).all()
+    assert (continuity_logp(*_continuity_case()[0], inside=0.0, outside=0.0) == 0).all()

@@ -3,11 +3,13 @@
 For each shipped layout and each method x temporal mode in :data:`COMBOS`, label synthetic
 takes (the generator's realistic takes, and clean tracks broken up by ``corrupt_take``), record
 each segment's raw confidence and whether it was entirely right, and fit the monotone,
-conservative map of ``core/temporal/confidence.py``. For the default pipeline (:data:`PRIOR_COMBOS`)
-it first fits the vote's switch cost (:func:`fit_switch_cost`), then its null prior and rigid-partner evidence together
-(:func:`fit_prior_and_partner`), in turn until the switch cost is stable (:func:`fit_vote_settings`), and calibrates
-the decisions made with them. ``gmm`` is fitted on the first :data:`FIT_FRAMES` true frames of each take and ``nearest``
-starts from the true first frame; only the frames after those are labeled. Writes
+conservative map of ``core/temporal/confidence.py``. For the default pipeline
+(:data:`PRIOR_COMBOS`) it first fits the vote's switch cost (:func:`fit_switch_cost`), then its
+null prior and rigid-partner evidence together (:func:`fit_prior_and_partner`), then its
+continuity evidence (:func:`fit_continuity`), in turn until the switch cost is stable
+(:func:`fit_vote_settings`), and calibrates the decisions made with them. ``gmm`` is fitted on
+the first :data:`FIT_FRAMES` true frames of each take and ``nearest`` starts from the true first
+frame; only the frames after those are labeled. Writes
 ``addon/mocap_autolabel/models/confidence.json``. Needs no PyTorch; rerun after retraining a model.
 """
 
@@ -33,6 +35,7 @@ from mocap_autolabel.core.temporal.confidence import (
     CALIBRATIONS,
     calibration_key,
     fit_calibration,
+    load_continuity,
     load_null_prior,
     load_partner,
 )
@@ -66,6 +69,10 @@ PRIOR_TOLERANCE = 0.01
 PARTNERS = ((0.0, 0.0), (0.0, 2.0), (1.0, 2.0), (1.0, 4.0), (1.0, 6.0), (2.0, 4.0))
 
 
+#: Continuity evidence tried, ``(inside, outside)`` nats per sample near a trajectory's ends (see
+#: ``core.temporal.continuity``), at the fitted switch cost, prior and partner evidence. Evidence
+#: for a label that lands where it was adds little: the ghosts it is for are told by missing that.
+CONTINUITIES = ((0.0, 0.0), (0.0, 2.0), (0.0, 4.0), (0.0, 8.0), (1.0, 4.0))
 #: Thumb-on-finger contacts per minute in the validation takes (a per-take rate drawn from this):
 #: pinches and grasps, where a thumb tip reads as the finger's marker for seconds on end, are what
 #: the switch cost and the rigid partners are for; takes without them fitted those blind.
@@ -152,28 +159,42 @@ def fit_prior_and_partner(data: list, layout, method: str, labelers: list,
     return prior, partner, tried
 
 
-#: Rounds of :func:`fit_vote_settings` at most: each refits the switch cost at the last prior and
-#: partner evidence, then those two at that cost, until the switch cost stays where it was.
+def fit_continuity(data: list, layout, method: str, labelers: list, **fixed) -> tuple[tuple[float, float], dict]:
+    """Continuity evidence from :data:`CONTINUITIES`: of the settings within :data:`PRIOR_TOLERANCE`
+    points of the best share of correct instances, the one with the least evidence against; and
+    the share (%) at each."""
+    shares = vote_shares(data, layout, method, labelers, [{"continuity": c} for c in CONTINUITIES], **fixed)
+    tried = dict(zip(CONTINUITIES, shares))
+    near = [c for c, share in tried.items() if share >= max(shares) - PRIOR_TOLERANCE]
+    return min(near, key=lambda c: (c[1], c[0])), tried
+
+
+#: Rounds of :func:`fit_vote_settings` at most: each refits the switch cost at the last prior,
+#: partner and continuity evidence, then those at that cost, until the switch cost stays where it was.
 FIT_ROUNDS = 3
 
 
-def fit_vote_settings(data: list, layout, method: str, labelers: list, prior: float,
-                      partner: tuple[float, float]) -> tuple[float, float, tuple[float, float], dict]:
-    """Switch cost, null prior and partner evidence, fitted in turn from the given prior and
-    partner until the switch cost is stable (at most :data:`FIT_ROUNDS` rounds): fitted once, the
-    cost chosen at the old prior and partner need not be the best at the new ones (on han19 with
-    misplaced markers it was 500 nats where 300 was within tolerance at the new pair). Returns the
-    three and the shares tried in the last round."""
+def fit_vote_settings(data: list, layout, method: str, labelers: list, prior: float, partner: tuple[float, float],
+                      continuity: tuple[float, float]) -> tuple[float, float, tuple[float, float], tuple[float, float],
+                                                                dict]:
+    """Switch cost, null prior with partner evidence, and continuity evidence, fitted in turn from
+    the given prior, partner and continuity until the switch cost is stable (at most
+    :data:`FIT_ROUNDS` rounds): fitted once, the cost chosen at the old settings need not be the
+    best at the new ones (on han19 with misplaced markers it was 500 nats where 300 was within
+    tolerance at the new pair). Returns the four and the shares tried in the last round."""
     switch = None
+    tried: dict = {}
     for _ in range(FIT_ROUNDS):
-        new_switch, switch_tried = fit_switch_cost(data, layout, method, labelers, null_prior=(prior, 0.0),
-                                                   partner=partner)
+        new_switch, tried["switch_cost"] = fit_switch_cost(data, layout, method, labelers, null_prior=(prior, 0.0),
+                                                           partner=partner, continuity=continuity)
         if new_switch == switch:
             break
         switch = new_switch
-        prior, partner, grid_tried = fit_prior_and_partner(data, layout, method, labelers,
-                                                           switch_cost=(0.0, switch))
-    return switch, prior, partner, {"switch_cost": switch_tried, "prior_partner": grid_tried}
+        prior, partner, tried["prior_partner"] = fit_prior_and_partner(
+            data, layout, method, labelers, switch_cost=(0.0, switch), continuity=continuity)
+        continuity, tried["continuity"] = fit_continuity(data, layout, method, labelers, switch_cost=(0.0, switch),
+                                                         null_prior=(prior, 0.0), partner=partner)
+    return switch, prior, partner, continuity, tried
 
 
 def shipped_layouts() -> list[str]:
@@ -199,20 +220,20 @@ def main(argv: list[str] | None = None) -> int:
         combos = [tuple(c.split("/")) for c in args.only] if args.only else COMBOS
         for method, temporal in combos:
             seg = []
-            prior, switch, partner, tried = 0.0, 0.0, (0.0, 0.0), {}
+            prior, switch, partner, continuity, tried = 0.0, 0.0, (0.0, 0.0), (0.0, 0.0), {}
             labelers = [None] * len(data)
             if (method, temporal) in PRIOR_COMBOS:
                 labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
                 # From the shipped prior and partner evidence: the switch cost, then both of
                 # those together at that cost, until the cost is stable.
-                switch, prior, partner, tried = fit_vote_settings(
+                switch, prior, partner, continuity, tried = fit_vote_settings(
                     data, layout, method, labelers, load_null_prior(method, temporal, name, args.out)[0],
-                    load_partner(method, temporal, name, args.out))
+                    load_partner(method, temporal, name, args.out), load_continuity(method, temporal, name, args.out))
                 print(f"{name} {method}+{temporal}: switch cost {switch} nats, null prior {prior} nats per tracklet, "
-                      f"partner evidence {partner}; correct % tried: {tried}", file=sys.stderr)
+                      f"partner evidence {partner}, continuity {continuity}; correct % tried: {tried}", file=sys.stderr)
             for (take, truth, markers), labeler in zip(data, labelers):
                 options = {"null_prior": (prior, 0.0), "switch_cost": (0.0, switch), "partner": partner,
-                           "labeler": labeler}
+                           "continuity": continuity, "labeler": labeler}
                 if method == "gmm":
                     options["labeler"] = GmmLabeler(layout).fit(markers[:FIT_FRAMES])
                 if method == "nearest":
@@ -228,7 +249,9 @@ def main(argv: list[str] | None = None) -> int:
                 table[calibration_key(method, temporal, name)].update(
                     null_prior=[prior, 0.0], switch_cost=[0.0, switch],
                     switch_cost_tried={str(k): v for k, v in tried["switch_cost"].items()}, partner=list(partner),
-                    prior_partner_tried={f"{k[0]} {list(k[1])}": v for k, v in tried["prior_partner"].items()})
+                    prior_partner_tried={f"{k[0]} {list(k[1])}": v for k, v in tried["prior_partner"].items()},
+                    continuity=list(continuity),
+                    continuity_tried={str(list(k)): v for k, v in tried["continuity"].items()})
             hi = cal(evidence, labeled=labeled) >= 0.95  # as the pipeline calls it
             print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
                   f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "

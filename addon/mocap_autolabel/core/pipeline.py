@@ -24,11 +24,13 @@ from .layout import Layout
 from .take import Take
 from .temporal.confidence import (
     load_calibration,
+    load_continuity,
     load_null_prior,
     load_partner,
     load_switch_cost,
     segment_evidence,
 )
+from .temporal.continuity import continuity_logp
 from .temporal.partners import partner_logp, rigid_pairs, take_distances
 from .temporal.voting import (
     LOG_FLOOR,
@@ -133,7 +135,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                n_best: int = 5, split_swaps: bool = True, labeler: Labeler | None = None, calibrate: bool = True,
                validate: bool = False, hand: Calibration | None = None, splits: Sequence[tuple[int, int]] = (),
                null_prior: tuple[float, float] | None = None, switch_cost: tuple[float, float] | None = None,
-               partner: tuple[float, float] | None = None, progress: Callable[[str], None] | None = None) -> Labeling:
+               partner: tuple[float, float] | None = None, continuity: tuple[float, float] | None = None,
+               progress: Callable[[str], None] | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -167,6 +170,11 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             that frame; the vote then runs again (:mod:`.temporal.partners`; ``vote`` with
             ``likelihood`` only). Default: the one fitted for this method and layout, shipped
             beside the null prior.
+        continuity: ``(inside, outside)`` nats per sample near a trajectory's ends for (against) a
+            label whose last sample before it (first after it), carried by its neighbours' motion,
+            lands (does not land) on the trajectory's end (:mod:`.temporal.continuity`); read off
+            the first vote with the partners' evidence. Default: the one fitted for this method
+            and layout, shipped beside the null prior.
         progress: called with a short message at each stage.
 
     Returns:
@@ -225,10 +233,14 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if partner is None:
         partner = load_partner(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
     info["partner"] = [float(v) for v in partner]
+    if continuity is None:
+        continuity = load_continuity(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
+    info["continuity"] = [float(v) for v in continuity]
 
     def decide(scores: np.ndarray) -> Labeling:
         return _decide(scores, batch, take, layout, method, temporal, segments, locked_at, info, score, p, q,
-                       split_swaps, n_best, calibrate, null_prior, crossings, switch_cost, partner)
+                       split_swaps, n_best, calibrate, null_prior, crossings, switch_cost, partner,
+                       continuity)
 
     say(f"temporal step: {temporal}")
     t = time.perf_counter()
@@ -255,7 +267,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
             segments: Segments, locked_at: np.ndarray, info: dict, score: str, p: float, q: float,
             split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float],
             crossings: dict[int, list[int]], switch_cost: tuple[float, float],
-            partner: tuple[float, float] | None) -> Labeling:
+            partner: tuple[float, float] | None, continuity: tuple[float, float]) -> Labeling:
     """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
@@ -272,12 +284,18 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
 
         decided, label, seg, facts = run_vote(samples)
         rigid = rigid_pairs(layout) if partner and any(partner) else None
+        extra = np.zeros_like(samples.logp)
+        per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
+        at = points[f_idx, k_idx].astype(np.float64)
         if rigid is not None and len(rigid):
             # Vote again with the evidence of rigid partners, read off the first vote's labels.
-            per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
-            at = points[f_idx, k_idx].astype(np.float64)
             rigid = take_distances(rigid, at, samples.frame, per, len(layout))
-            extra = partner_logp(at, samples.frame, per, len(layout), rigid, *partner)
+            extra += partner_logp(at, samples.frame, per, len(layout), rigid, *partner)
+        if any(continuity):
+            held_for = np.where(seg >= 0, (decided.stop - decided.start)[np.maximum(seg, 0)], 0)
+            extra += continuity_logp(at, samples.frame, samples.slot, per, held_for, segments, len(layout),
+                                     take.rate, *continuity)
+        if extra.any():
             decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
         info.update(facts)
         first_locked = locked_at[decided.start, decided.slot]

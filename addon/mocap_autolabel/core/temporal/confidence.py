@@ -245,3 +245,9 @@ def load_partner(method: str, temporal: str, layout: str, path: str = CALIBRATIO
     """The shipped rigid-partner evidence ``(inside, outside)`` nats per sample of a method,
     temporal mode and layout (see :mod:`.partners`); none where none was fitted."""
     return _fitted_pair(method, temporal, layout, path, "partner")
+
+
+def load_continuity(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> tuple[float, float]:
+    """The shipped continuity evidence ``(inside, outside)`` nats per sample of a method, temporal
+    mode and layout (see :mod:`.continuity`); none where none was fitted."""
+    return _fitted_pair(method, temporal, layout, path, "continuity")
