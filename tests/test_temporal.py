@@ -498,6 +498,30 @@ def test_vote_settings_are_refitted_until_the_switch_cost_is_stable(monkeypatch)
     assert max(tried["continuity"], key=tried["continuity"].get) == (0.0, 4.0)
 
 
+def test_continuity_alone_is_refitted_at_the_shipped_vote_settings(tmp_path):
+    import json
+    import shutil
+
+    from mocap_autolabel.core.temporal.confidence import CALIBRATIONS
+
+    import training.confidence as fit
+
+    out = tmp_path / "confidence.json"
+    shutil.copy(CALIBRATIONS, out)
+    before = json.loads(out.read_text())
+    assert fit.main(["--layouts", "han19", "--only", "set/vote", "--fit", "continuity", "--takes", "2",
+                     "--frames", "150", "--out", str(out)]) == 0
+    after = json.loads(out.read_text())
+    old, new = before["set/vote/han19"], after["set/vote/han19"]
+    for kept in ("switch_cost", "null_prior", "partner", "switch_cost_tried", "prior_partner_tried"):
+        assert new[kept] == old[kept], kept
+    assert tuple(new["continuity"]) in fit.CONTINUITIES
+    assert set(new["continuity_tried"]) == {str(list(c)) for c in fit.CONTINUITIES}
+    assert new["source"].startswith("2 synthetic takes")
+    assert {k: v for k, v in after.items() if k != "set/vote/han19"} == {
+        k: v for k, v in before.items() if k != "set/vote/han19"}
+
+
 def test_empty_and_ghost_flooded_takes(han19, synth_take):
     empty = Take(positions=np.full((10, 3, 3), np.nan, dtype=np.float32), names=["*0", "*1", "*2"], rate=100.0,
                  source="empty.c3d")

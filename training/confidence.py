@@ -7,7 +7,8 @@ conservative map of ``core/temporal/confidence.py``. For the default pipeline
 (:data:`PRIOR_COMBOS`) it first fits the vote's switch cost (:func:`fit_switch_cost`), then its
 null prior and rigid-partner evidence together (:func:`fit_prior_and_partner`), then its
 continuity evidence (:func:`fit_continuity`), in turn until the switch cost is stable
-(:func:`fit_vote_settings`), and calibrates the decisions made with them. ``gmm`` is fitted on
+(:func:`fit_vote_settings`; ``--fit continuity`` fits only the continuity evidence, at the shipped
+rest, in minutes rather than an hour), and calibrates the decisions made with them. ``gmm`` is fitted on
 the first :data:`FIT_FRAMES` true frames of each take and ``nearest`` starts from the true first
 frame; only the frames after those are labeled. Writes
 ``addon/mocap_autolabel/models/confidence.json``. Needs no PyTorch; rerun after retraining a model.
@@ -38,6 +39,7 @@ from mocap_autolabel.core.temporal.confidence import (
     load_continuity,
     load_null_prior,
     load_partner,
+    load_switch_cost,
 )
 
 #: Seeds of the calibration takes: apart from the benchmarks' and the tests' seeds.
@@ -197,6 +199,21 @@ def fit_vote_settings(data: list, layout, method: str, labelers: list, prior: fl
     return switch, prior, partner, continuity, tried
 
 
+def shipped_grids(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> dict:
+    """The shares tried when the shipped switch cost, prior and partner evidence were fitted (as
+    written in the calibration file), for a run that fits only the continuity evidence."""
+    with open(path, encoding="utf-8") as fh:
+        entry = json.load(fh).get(calibration_key(method, temporal, layout), {})
+    return {"switch_cost": entry.get("switch_cost_tried", {}), "prior_partner": entry.get("prior_partner_tried", {})}
+
+
+def grid_keys(tried: dict) -> dict:
+    """``tried`` of :func:`fit_vote_settings` with JSON keys, as the calibration file writes them."""
+    return {"switch_cost": {str(k): v for k, v in tried["switch_cost"].items()},
+            "prior_partner": {f"{k[0]} {list(k[1])}": v for k, v in tried["prior_partner"].items()},
+            "continuity": tried["continuity"]}
+
+
 def shipped_layouts() -> list[str]:
     """The layouts that have a shipped ``set`` model (the calibrations follow the models)."""
     return sorted(f[len("set_"):-len(".onnx")] for f in os.listdir(MODELS_DIR)
@@ -212,6 +229,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--layouts", nargs="*", help="layouts (default: every shipped one; one process per layout "
                                                  "runs them side by side into the same --out)")
     ap.add_argument("--out", default=CALIBRATIONS)
+    ap.add_argument("--fit", choices=("all", "continuity"), default="all",
+                    help="vote settings of the default pipeline to fit: all of them in turn (default; an hour "
+                         "or more per layout), or only the continuity evidence at the shipped switch cost, "
+                         "prior and partner evidence (minutes)")
     args = ap.parse_args(argv)
     table = {}  # the calibrations made by this run
     for name in args.layouts or shipped_layouts():
@@ -226,9 +247,19 @@ def main(argv: list[str] | None = None) -> int:
                 labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
                 # From the shipped prior and partner evidence: the switch cost, then both of
                 # those together at that cost, until the cost is stable.
-                switch, prior, partner, continuity, tried = fit_vote_settings(
-                    data, layout, method, labelers, load_null_prior(method, temporal, name, args.out)[0],
-                    load_partner(method, temporal, name, args.out), load_continuity(method, temporal, name, args.out))
+                prior = load_null_prior(method, temporal, name, args.out)[0]
+                partner = load_partner(method, temporal, name, args.out)
+                if args.fit == "continuity":
+                    switch = load_switch_cost(method, temporal, name, args.out)[1]
+                    continuity, tried["continuity"] = fit_continuity(
+                        data, layout, method, labelers, switch_cost=(0.0, switch), null_prior=(prior, 0.0),
+                        partner=partner)
+                    tried.update(shipped_grids(method, temporal, name, args.out))
+                else:
+                    switch, prior, partner, continuity, tried = fit_vote_settings(
+                        data, layout, method, labelers, prior, partner,
+                        load_continuity(method, temporal, name, args.out))
+                    tried = grid_keys(tried)
                 print(f"{name} {method}+{temporal}: switch cost {switch} nats, null prior {prior} nats per tracklet, "
                       f"partner evidence {partner}, continuity {continuity}; correct % tried: {tried}", file=sys.stderr)
             for (take, truth, markers), labeler in zip(data, labelers):
@@ -248,8 +279,8 @@ def main(argv: list[str] | None = None) -> int:
             if tried:
                 table[calibration_key(method, temporal, name)].update(
                     null_prior=[prior, 0.0], switch_cost=[0.0, switch],
-                    switch_cost_tried={str(k): v for k, v in tried["switch_cost"].items()}, partner=list(partner),
-                    prior_partner_tried={f"{k[0]} {list(k[1])}": v for k, v in tried["prior_partner"].items()},
+                    switch_cost_tried=tried["switch_cost"], partner=list(partner),
+                    prior_partner_tried=tried["prior_partner"],
                     continuity=list(continuity),
                     continuity_tried={str(list(k)): v for k, v in tried["continuity"].items()})
             hi = cal(evidence, labeled=labeled) >= 0.95  # as the pipeline calls it
