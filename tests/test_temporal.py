@@ -14,7 +14,13 @@ from mocap_autolabel.core.metrics import segments_right
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
-from mocap_autolabel.core.temporal.confidence import fit_calibration, load_null_prior, load_partner, load_switch_cost
+from mocap_autolabel.core.temporal.confidence import (
+    fit_calibration,
+    load_continuity,
+    load_null_prior,
+    load_partner,
+    load_switch_cost,
+)
 from mocap_autolabel.core.temporal.partners import (
     TOLERANCE,
     TOLERANCE_SHARE,
@@ -162,12 +168,12 @@ def test_label_take_uses_the_shipped_vote_settings_unless_given_them():
     layout = load_layout("glove13")
     s = synthesize(layout, 240, seed=4)
     shipped, switch = load_null_prior("set", "vote", "glove13"), load_switch_cost("set", "vote", "glove13")
-    partner = load_partner("set", "vote", "glove13")
+    partner, continuity = load_partner("set", "vote", "glove13"), load_continuity("set", "vote", "glove13")
     # Fitted by training.confidence for the default pipeline.
-    assert shipped[0] > 0.0 and switch[1] > 0.0 and any(partner)
+    assert shipped[0] > 0.0 and switch[1] > 0.0 and any(partner) and any(continuity)
     info = label_take(s.take, layout).info
     assert info["null_prior"] == list(shipped) and info["switch_cost"] == list(switch)
-    assert info["partner"] == list(partner)
+    assert info["partner"] == list(partner) and info["continuity"] == list(continuity)
     info = label_take(s.take, layout, null_prior=(0.0, 0.0), switch_cost=(0.0, 0.0), partner=(0.0, 0.0)).info
     assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0] and info["partner"] == [0.0, 0.0]
     info = label_take(s.take, layout, score="power").info  # fitted for the likelihood score only
@@ -484,8 +490,9 @@ def test_vote_settings_are_refitted_until_the_switch_cost_is_stable(monkeypatch)
             s = {"continuity": (0.0, 0.0), **fixed, **setting}
             target = 500.0 if s["null_prior"][0] < 4 else 300.0
             inside, outside = s["partner"]
-            out.append(99.0 - abs(s["switch_cost"][1] - target) / 100 - abs(s["null_prior"][0] - 8)
-                       - (abs(inside - 1) + abs(outside - 4)) / 10 - abs(s["continuity"][1] - 4) / 10)
+            share = (99.0 - abs(s["switch_cost"][1] - target) / 100 - abs(s["null_prior"][0] - 8)
+                     - (abs(inside - 1) + abs(outside - 4)) / 10 - abs(s["continuity"][1] - 4) / 10)
+            out.append((share, 90.0 + share / 100))
         return out
 
     monkeypatch.setattr(fit, "vote_shares", shares)
@@ -496,6 +503,14 @@ def test_vote_settings_are_refitted_until_the_switch_cost_is_stable(monkeypatch)
     assert set(tried) == {"switch_cost", "prior_partner", "continuity"}
     assert max(tried["switch_cost"], key=tried["switch_cost"].get) == 300.0
     assert max(tried["continuity"], key=tried["continuity"].get) == (0.0, 4.0)
+
+
+def test_vote_settings_within_tolerance_of_the_best_instances():
+    import training.confidence as fit
+
+    tried = {(0.0, 2.0): (99.740, 97.59), (0.0, 4.0): (99.745, 97.69), (1.0, 4.0): (99.744, 97.69),
+             (0.0, 8.0): (99.720, 97.80)}
+    assert sorted(fit.near_best(tried)) == [(0.0, 2.0), (0.0, 4.0), (1.0, 4.0)]  # frames recorded, not used
 
 
 def test_continuity_alone_is_refitted_at_the_shipped_vote_settings(tmp_path):
