@@ -222,11 +222,15 @@ def shipped_grids(method: str, temporal: str, layout: str, path: str = CALIBRATI
     return {"switch_cost": entry.get("switch_cost_tried", {}), "prior_partner": entry.get("prior_partner_tried", {})}
 
 
+#: How the calibration file writes the settings of each grid of :func:`fit_vote_settings`.
+GRID_KEYS = {"switch_cost": str, "prior_partner": lambda k: f"{k[0]} {list(k[1])}",
+             "continuity": lambda k: str(list(k))}
+
+
 def grid_keys(tried: dict) -> dict:
-    """``tried`` of :func:`fit_vote_settings` with JSON keys, as the calibration file writes them."""
-    return {"switch_cost": {str(k): v for k, v in tried["switch_cost"].items()},
-            "prior_partner": {f"{k[0]} {list(k[1])}": v for k, v in tried["prior_partner"].items()},
-            "continuity": tried["continuity"]}
+    """The grids of ``tried`` (those of :func:`fit_vote_settings`, or some of them) with JSON keys,
+    as the calibration file writes them."""
+    return {grid: {GRID_KEYS[grid](k): v for k, v in shares.items()} for grid, shares in tried.items()}
 
 
 def shipped_layouts() -> list[str]:
@@ -260,8 +264,9 @@ def main(argv: list[str] | None = None) -> int:
             labelers = [None] * len(data)
             if (method, temporal) in PRIOR_COMBOS:
                 labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
-                # From the shipped prior and partner evidence: the switch cost, then both of
-                # those together at that cost, until the cost is stable.
+                # From the shipped settings: the switch cost, then the prior and partner evidence
+                # at that cost, then the continuity evidence, until the cost is stable (or only
+                # the continuity evidence, at the shipped rest).
                 prior = load_null_prior(method, temporal, name, args.out)[0]
                 partner = load_partner(method, temporal, name, args.out)
                 if args.fit == "continuity":
@@ -269,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
                     continuity, tried["continuity"] = fit_continuity(
                         data, layout, method, labelers, switch_cost=(0.0, switch), null_prior=(prior, 0.0),
                         partner=partner)
-                    tried.update(shipped_grids(method, temporal, name, args.out))
+                    tried = {**shipped_grids(method, temporal, name, args.out), **grid_keys(tried)}
                 else:
                     switch, prior, partner, continuity, tried = fit_vote_settings(
                         data, layout, method, labelers, prior, partner,
@@ -296,8 +301,7 @@ def main(argv: list[str] | None = None) -> int:
                     null_prior=[prior, 0.0], switch_cost=[0.0, switch],
                     switch_cost_tried=tried["switch_cost"], partner=list(partner),
                     prior_partner_tried=tried["prior_partner"],
-                    continuity=list(continuity),
-                    continuity_tried={str(list(k)): v for k, v in tried["continuity"].items()})
+                    continuity=list(continuity), continuity_tried=tried["continuity"])
             hi = cal(evidence, labeled=labeled) >= 0.95  # as the pipeline calls it
             print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
                   f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "

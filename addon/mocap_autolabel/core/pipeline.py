@@ -284,19 +284,22 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
 
         decided, label, seg, facts = run_vote(samples)
         rigid = rigid_pairs(layout) if partner and any(partner) else None
-        extra = np.zeros_like(samples.logp)
-        per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
-        at = points[f_idx, k_idx].astype(np.float64)
-        if rigid is not None and len(rigid):
-            # Vote again with the evidence of rigid partners, read off the first vote's labels.
-            rigid = take_distances(rigid, at, samples.frame, per, len(layout))
-            extra += partner_logp(at, samples.frame, per, len(layout), rigid, *partner)
-        if any(continuity):
-            held_for = np.where(seg >= 0, (decided.stop - decided.start)[np.maximum(seg, 0)], 0)
-            extra += continuity_logp(at, samples.frame, samples.slot, per, held_for, segments, len(layout),
-                                     take.rate, *continuity)
-        if extra.any():
-            decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
+        with_rigid, with_continuity = rigid is not None and len(rigid) > 0, any(continuity)
+        if with_rigid or with_continuity:
+            # Vote again with the evidence of rigid partners and of continuity, read off the first
+            # vote's labels.
+            extra = np.zeros_like(samples.logp)
+            per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
+            at = points[f_idx, k_idx].astype(np.float64)
+            if with_rigid:
+                rigid = take_distances(rigid, at, samples.frame, per, len(layout))
+                extra += partner_logp(at, samples.frame, per, len(layout), rigid, *partner)
+            if with_continuity:
+                held_for = np.where(seg >= 0, (decided.stop - decided.start)[np.maximum(seg, 0)], 0)
+                extra += continuity_logp(at, samples.frame, samples.slot, per, held_for, segments, len(layout),
+                                         take.rate, *continuity)
+            if extra.any():
+                decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
         info.update(facts)
         first_locked = locked_at[decided.start, decided.slot]
         labeling = Labeling(names=layout.names, n_frames=take.n_frames, n_points=take.n_points,

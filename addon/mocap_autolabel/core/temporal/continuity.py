@@ -69,6 +69,7 @@ def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, 
     own = np.full((frames, int(slot.max()) + 1, 3), np.nan)
     own[frame, slot] = positions
     seg = segment_of(tracklets, frame, slot)
+    s = np.flatnonzero(seg >= 0)  # the samples on a checked trajectory
     max_gap = MAX_GAP_S * rate
     before = np.where((tracklets.start > 0)[:, None], last[np.maximum(tracklets.start - 1, 0)], -1)
     after = np.where((tracklets.stop < frames)[:, None], first[np.minimum(tracklets.stop, frames - 1)], frames)
@@ -98,8 +99,6 @@ def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, 
             tol = TOLERANCE + SPEED * gap[ti, li] / rate
             fine = (count > 0) | (gap[ti, li] <= 2)  # no neighbours: only a short gap is judged
             evidence[ti[fine], li[fine]] = np.where(r[fine] <= tol[fine], inside, -outside)
-        ok_s = seg >= 0
-        s = np.flatnonzero(ok_s)
         edge = tracklets.start[seg[s]] if end == "start" else tracklets.stop[seg[s]] - 1
         near_end = np.abs(frame[s] - edge) < window
         rows = s[near_end]
