@@ -30,7 +30,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from datasets import HAN2018, glove13_take, han2018_sequences  # noqa: E402
 from mocap_autolabel.core.labelers.gmm import GmmLabeler  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
-from mocap_autolabel.core.metrics import score_labeling, segments_right  # noqa: E402
+from mocap_autolabel.core.metrics import clustered_se, score_labeling, segments_right  # noqa: E402
 from mocap_autolabel.core.pipeline import label_take  # noqa: E402
 from mocap_autolabel.core.synth.generate import GHOST, _pack, corrupt_take, save_synth, synthesize  # noqa: E402
 from mocap_autolabel.core.take import Take  # noqa: E402
@@ -93,6 +93,7 @@ def stats(cases: list[Case], m: int) -> dict:
 
 def run(cases: list[Case], layout, method: str, temporal: str, score: str) -> tuple[dict, float, list]:
     total = dict.fromkeys(COUNTS, 0)
+    total["per_take"] = []  # (correct, instances, frames all right, frames) of each take
     seconds, segments = 0.0, []
     fitted: dict[int, GmmLabeler] = {}  # one fit per subject, as in the paper
     for c in cases:
@@ -107,6 +108,7 @@ def run(cases: list[Case], layout, method: str, temporal: str, score: str) -> tu
         s = score_labeling(labeling.per_sample(), c.truth, c.take.valid, len(layout)).as_dict()
         for key in COUNTS:
             total[key] += s[key]
+        total["per_take"].append([s[key] for key in ("correct", "instances", "frames_all_correct", "frames")])
         # Per segment: its confidence and whether every sample of it is right.
         right = segments_right(labeling, c.truth, c.take.valid)
         segments.append(np.stack([labeling.confidence, right, labeling.length], axis=1))
@@ -193,12 +195,20 @@ def main() -> int:
     return 0
 
 
+def _se(hits: np.ndarray, counts: np.ndarray, digits: int) -> str:
+    """' ± SE' of a share over takes, or nothing for a single take."""
+    se = clustered_se(hits, counts)
+    return "" if np.isnan(se) else f" ± {se:.{digits}f}"
+
+
 def write_report(results: dict, reliability: dict, speed: dict) -> None:
     REPORTS.mkdir(exist_ok=True)
     lines = ["# Temporal labeling", "",
              f"`python benchmarks/temporal.py` on {platform.machine()}, {platform.python_version()}. Instance metrics "
              "as in METHODS.md; frames = share of frames with every label right. Default pipeline: set + vote "
-             "(likelihood). 'power' is Ghorbani's trajectory vote (p = 2, q = -1/2); both votes are exclusive in time.",
+             "(likelihood). 'power' is Ghorbani's trajectory vote (p = 2, q = -1/2); both votes are exclusive in time. "
+             "± is one standard error with the takes as the units (`core.metrics.clustered_se`): errors cluster "
+             "within a take, so a bar closer to a figure than that is not settled by this data.",
              ""]
     for name, res in results.items():
         s = res["stats"]
@@ -210,9 +220,10 @@ def write_report(results: dict, reliability: dict, speed: dict) -> None:
                   "| frames/s |",
                   "|---|---|---|---|---|---|---|"]
         for key, (t, fps) in res["rows"].items():
-            lines.append(f"| {key} | {100 * t['correct'] / t['instances']:.3f} | "
-                         f"{100 * t['frames_all_correct'] / t['frames']:.2f} | {t['erroneous']:,} | "
-                         f"{t['false_marker']:,} | {t['false_occlusion']:,} | {fps:,.0f} |")
+            correct, instances, frames_right, frames = np.array(t["per_take"]).T
+            lines.append(f"| {key} | {100 * t['correct'] / t['instances']:.3f}{_se(correct, instances, 3)} | "
+                         f"{100 * t['frames_all_correct'] / t['frames']:.2f}{_se(frames_right, frames, 2)} | "
+                         f"{t['erroneous']:,} | {t['false_marker']:,} | {t['false_occlusion']:,} | {fps:,.0f} |")
         lines.append("")
     lines += ["## Confidence (set + vote), per segment", "",
               "| data | segments | share at >= 0.95 | right at >= 0.95 % | right below 0.95 % |",

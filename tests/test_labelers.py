@@ -12,7 +12,7 @@ from mocap_autolabel.core.labelers.gmm import GmmLabeler
 from mocap_autolabel.core.labelers.inputs import depth_image, pca_slots
 from mocap_autolabel.core.labelers.nearest import NearestLabeler, digit_chains
 from mocap_autolabel.core.layout import load_layout
-from mocap_autolabel.core.metrics import data_set_stats, score_labeling
+from mocap_autolabel.core.metrics import clustered_se, data_set_stats, score_labeling
 from mocap_autolabel.core.rotations import random_rotations
 from mocap_autolabel.core.synth.frames import FrameConfig, sample_frames
 from mocap_autolabel.core.synth.generate import clean_config, synthesize
@@ -178,3 +178,13 @@ def test_nearest_tracks_from_the_first_frame_and_restarts_at_fallbacks(clean_tak
 def test_make_labeler_rejects_unknown_methods():
     with pytest.raises(ValueError, match="choose one of set, perm"):
         make_labeler("magic", load_layout("han19"))
+
+
+def test_clustered_se_counts_takes_not_frames():
+    # Two takes alike: no spread, no error. One wholly bad take among three clean ones: the pooled
+    # share is 75 %, the takes' residuals -75, 25, 25 and 25 frames of 400.
+    assert clustered_se([90, 90], [100, 100]) == 0.0
+    se = clustered_se([0, 100, 100, 100], [100, 100, 100, 100])
+    assert se == pytest.approx(100 * np.sqrt(4 / 3 * (75 ** 2 + 3 * 25 ** 2)) / 400)
+    assert se > 100 * np.sqrt(0.75 * 0.25 / 400)  # wider than frames counted as independent
+    assert np.isnan(clustered_se([5], [10]))

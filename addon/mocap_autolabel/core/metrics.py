@@ -118,3 +118,16 @@ def segments_right(labeling, truth: np.ndarray, valid: np.ndarray) -> np.ndarray
     ids = labeling.segment_ids()
     wrong = np.bincount(ids[valid], weights=labeling.per_sample()[valid] != t[valid], minlength=len(labeling))
     return wrong == 0
+
+
+def clustered_se(hits: np.ndarray, counts: np.ndarray) -> float:
+    """Standard error (percentage points) of a pooled share ``sum(hits) / sum(counts)`` with the
+    takes as the units: errors cluster within a take (one missed swap spoils a hundred frames),
+    so counting frames or instances as independent would understate it. Ratio estimator over
+    ``(T,)`` per-take ``hits`` and ``counts``; NaN with fewer than two takes."""
+    hits, counts = np.asarray(hits, dtype=float), np.asarray(counts, dtype=float)
+    n, total = len(hits), counts.sum()
+    if n < 2 or total <= 0:
+        return float("nan")
+    residual = hits - hits.sum() / total * counts
+    return float(100.0 * np.sqrt(n / (n - 1) * np.sum(residual ** 2)) / total)
