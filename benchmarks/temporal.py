@@ -92,9 +92,7 @@ def stats(cases: list[Case], m: int) -> dict:
 
 
 def run(cases: list[Case], layout, method: str, temporal: str, score: str) -> tuple[dict, float, list]:
-    total = dict.fromkeys(COUNTS, 0)
-    total["per_take"] = []  # (correct, instances, frames all right, frames) of each take
-    seconds, segments = 0.0, []
+    per_take, seconds, segments = [], 0.0, []
     fitted: dict[int, GmmLabeler] = {}  # one fit per subject, as in the paper
     for c in cases:
         t = time.perf_counter()
@@ -106,12 +104,13 @@ def run(cases: list[Case], layout, method: str, temporal: str, score: str) -> tu
                               labeler=gmm, start=c.start if method == "nearest" else None)
         seconds += time.perf_counter() - t
         s = score_labeling(labeling.per_sample(), c.truth, c.take.valid, len(layout)).as_dict()
-        for key in COUNTS:
-            total[key] += s[key]
-        total["per_take"].append([s[key] for key in ("correct", "instances", "frames_all_correct", "frames")])
+        per_take.append([s[key] for key in COUNTS])
         # Per segment: its confidence and whether every sample of it is right.
         right = segments_right(labeling, c.truth, c.take.valid)
         segments.append(np.stack([labeling.confidence, right, labeling.length], axis=1))
+    per_take = np.array(per_take, dtype=np.int64).reshape(-1, len(COUNTS))
+    total = {key: int(n) for key, n in zip(COUNTS, per_take.sum(axis=0))}
+    total["per_take"] = per_take  # (takes, COUNTS): for the standard errors over takes
     return total, sum(c.take.n_frames for c in cases) / max(seconds, 1e-9), segments
 
 
@@ -220,7 +219,8 @@ def write_report(results: dict, reliability: dict, speed: dict) -> None:
                   "| frames/s |",
                   "|---|---|---|---|---|---|---|"]
         for key, (t, fps) in res["rows"].items():
-            correct, instances, frames_right, frames = np.array(t["per_take"]).T
+            correct, instances, frames_right, frames = (t["per_take"][:, COUNTS.index(key)] for key in (
+                "correct", "instances", "frames_all_correct", "frames"))
             lines.append(f"| {key} | {100 * t['correct'] / t['instances']:.3f}{_se(correct, instances, 3)} | "
                          f"{100 * t['frames_all_correct'] / t['frames']:.2f}{_se(frames_right, frames, 2)} | "
                          f"{t['erroneous']:,} | {t['false_marker']:,} | {t['false_occlusion']:,} | {fps:,.0f} |")
