@@ -22,6 +22,7 @@ from mocap_autolabel.core.temporal.confidence import (
     load_switch_cost,
 )
 from mocap_autolabel.core.temporal.partners import (
+    OWN_TOLERANCE,
     TOLERANCE,
     TOLERANCE_SHARE,
     RigidPairs,
@@ -595,20 +596,28 @@ def test_rigid_pairs_are_the_markers_that_keep_their_distance(han19):
 
 
 def test_a_pair_labeled_together_long_enough_takes_the_takes_own_distance():
-    rigid = RigidPairs(np.array([[0, 1], [1, 0], [0, 2], [2, 0]]), np.full(4, 0.03), np.full(4, 0.0085))
+    rigid = RigidPairs(np.array([[0, 1], [1, 0], [0, 2], [2, 0], [0, 3], [3, 0]]),
+                       np.array([0.03, 0.03, 0.03, 0.03, 0.08, 0.08]), np.full(6, 0.0085))
     frames = 40
-    # Labels 0 and 1 are 45 mm apart in every frame (a larger hand); label 2 is seen in 10 frames.
-    positions = np.zeros((frames, 3, 3))
-    positions[:, 1, 0] = 0.045
+    # Labels 0 and 1 are 35 mm apart in every frame (a larger hand); label 2 is seen in 10 frames;
+    # label 3 is 85 mm from label 0 (a knuckle and the back of the hand).
+    positions = np.zeros((frames, 4, 3))
+    positions[:, 1, 0] = 0.035
     positions[:, 2, 1] = 0.05
-    label = np.tile([0, 1, 2], (frames, 1))
+    positions[:, 3, 2] = 0.085
+    label = np.tile([0, 1, 2, 3], (frames, 1))
     label[10:, 2] = NULL
-    frame = np.repeat(np.arange(frames), 3)
-    own = take_distances(rigid, positions.reshape(-1, 3), frame, label.ravel(), 3, min_frames=30)
-    assert np.allclose(own.distance, [0.045, 0.045, 0.03, 0.03])  # too few frames of label 2: the average's
-    assert np.allclose(own.tolerance, TOLERANCE + TOLERANCE_SHARE * own.distance)
-    fewer = take_distances(rigid, positions.reshape(-1, 3), frame, label.ravel(), 3, min_frames=41)
-    assert np.allclose(fewer.distance, 0.03)
+    frame = np.repeat(np.arange(frames), 4)
+    own = take_distances(rigid, positions.reshape(-1, 3), frame, label.ravel(), 4, min_frames=30)
+    assert np.allclose(own.distance, [0.035, 0.035, 0.03, 0.03, 0.085, 0.085])  # label 2: too few frames
+    # Below the cap the tolerance is the usual one; a long pair at its own distance is capped,
+    # while at the average hand's distance it keeps the share for hand size.
+    assert np.allclose(own.tolerance[:4], TOLERANCE + TOLERANCE_SHARE * own.distance[:4])
+    assert np.allclose(own.tolerance[4:], OWN_TOLERANCE)
+    assert TOLERANCE + TOLERANCE_SHARE * 0.085 > OWN_TOLERANCE
+    fewer = take_distances(rigid, positions.reshape(-1, 3), frame, label.ravel(), 4, min_frames=41)
+    assert np.allclose(fewer.distance, [0.03, 0.03, 0.03, 0.03, 0.08, 0.08])
+    assert np.allclose(fewer.tolerance, TOLERANCE + TOLERANCE_SHARE * fewer.distance)
 
 
 def test_partner_evidence_counts_each_labeled_partner_at_its_distance():
