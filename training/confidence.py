@@ -152,9 +152,9 @@ def near_best(tried: dict) -> list:
     the shipped settings were kept and only the continuity evidence refitted (``--fit
     continuity``): a full refit moved han19 to a switch cost of 500 nats and a null prior of 0
     (validation 99.7567 % / 97.68 % against 99.7447 / 97.68; han2018 98.75 % of frames against
-    99.04, 154 of its 172 extra bad frames in User1's takes) and glove13 to prior 0, partner (0, 2) and continuity
-    (0, 4) (99.9063 % / 99.08 % against 99.8906 / 98.87; the real glove13 recording stays at
-    100 %).
+    99.04, 154 of its 172 extra bad frames in User1's takes) and glove13 to prior 0, partner
+    (0, 2) and continuity (0, 4) (99.9063 % / 99.08 % against 99.8906 / 98.87; the real glove13
+    recording stays at 100 %).
     """
     best = max(share[0] for share in tried.values())
     return [key for key, share in tried.items() if share[0] >= best - PRIOR_TOLERANCE]
