@@ -219,7 +219,7 @@ def write_report(results: dict, reliability: dict, speed: dict) -> None:
                   "| frames/s |",
                   "|---|---|---|---|---|---|---|"]
         for key, (t, fps) in res["rows"].items():
-            correct, instances, frames_right, frames = (t["per_take"][:, COUNTS.index(key)] for key in (
+            correct, instances, frames_right, frames = (t["per_take"][:, COUNTS.index(count)] for count in (
                 "correct", "instances", "frames_all_correct", "frames"))
             lines.append(f"| {key} | {100 * t['correct'] / t['instances']:.3f}{_se(correct, instances, 3)} | "
                          f"{100 * t['frames_all_correct'] / t['frames']:.2f}{_se(frames_right, frames, 2)} | "
