@@ -303,6 +303,32 @@ def test_errors_are_clear(labeled):
         bpy.ops.mocap_autolabel.swap_labels()
 
 
+def test_a_file_that_names_its_points_gives_labeled_empties_the_plain_names(empty_scene, bpy_module, tmp_path):
+    """A labeled file's points import under the label names; labeling moves them into Raw as
+    "<name> (raw)", so the labeled empties are "BackHand1", not "BackHand1.001"."""
+    import dataclasses
+
+    from mocap_autolabel.blender.review import RAW_SUFFIX
+
+    bpy = bpy_module
+    layout = load_layout("han19")
+    take = synthesize(layout, 200, seed=5).take
+    names = [layout.names[i] if i < len(layout) else n for i, n in enumerate(take.names)]
+    path = tmp_path / "named.c3d"
+    write_c3d(dataclasses.replace(take, names=names), path)
+    bpy.ops.mocap_autolabel.import_markers(filepath=str(path))
+    settings = empty_scene.mocap_autolabel
+    settings.layout = "han19"
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    coll = settings.take
+    objs = labeled_objects(coll)
+    assert len(objs) == len(layout)
+    assert all(obj.name == layout.names[label] for label, obj in objs.items())
+    raw = {o["mocap_point"]: o.name for o in coll["mocap_raw"].objects}
+    assert all(raw[n] == n + RAW_SUFFIX for n in layout.names if n in raw)
+    assert sum(n in raw for n in layout.names) == min(len(layout), len(take.names))
+
+
 def test_label_needs_a_take(empty_scene, bpy_module):
     with pytest.raises(RuntimeError, match="Import a take first"):
         bpy_module.ops.mocap_autolabel.label()
