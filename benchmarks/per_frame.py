@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Per-frame labeling accuracy of every method (set, perm, cnn, gmm, nearest) on four data sets.
 
-    python benchmarks/per_frame.py [--every 2] [--quick]
+    python benchmarks/per_frame.py [--every 2] [--quick] [--set-model cand.onnx --report /tmp/cand]
 
 (a) han2018_dense19 with Han's protocol (drop 0-5 markers, add 0-2 ghosts per frame, seeded);
 (b) han2018 by number of occluded markers, no ghosts (Ghorbani's Table 1);
@@ -40,6 +40,8 @@ from mocap_autolabel.core.synth.generate import synthesize  # noqa: E402
 
 METHODS = ("set", "perm", "cnn", "gmm", "nearest")
 HAN = FrameConfig(drop=(0, 5), ghosts=(0, 2), distractor_share=0.0)
+#: Candidate ONNX models by (method, layout name), from ``--set-model``: scored instead of the shipped ones.
+CANDIDATES: dict[tuple[str, str], str] = {}
 
 
 class Case:
@@ -54,7 +56,7 @@ def run_method(method: str, layout, seqs: list[LabeledFrames], fit: np.ndarray |
     """Labels (concatenated over sequences) and frames per second."""
     labels, seconds, frames = [], 0.0, 0
     if method in ("set", "perm", "cnn"):
-        labeler = make_labeler(method, layout)
+        labeler = make_labeler(method, layout, model=CANDIDATES.get((method, layout.name)))
     elif method == "gmm":
         labeler = GmmLabeler(layout).fit(fit)
     for fr in seqs:
@@ -139,11 +141,17 @@ def main() -> int:
     ap.add_argument("--every", type=int, default=8, help="use every n-th han2018 frame")
     ap.add_argument("--quick", action="store_true", help="fewer frames, for a smoke run")
     ap.add_argument("--methods", nargs="*", default=list(METHODS))
+    ap.add_argument("--set-model", help="a candidate han19 'set' model (.onnx with its card) to score "
+                                        "instead of the shipped one")
+    ap.add_argument("--report", type=Path, default=ROOT / "benchmarks" / "reports",
+                    help="folder for per_frame.md and .png (give another with --set-model)")
     args = ap.parse_args()
+    if args.set_model:
+        CANDIDATES[("set", "han19")] = args.set_model
     if not Path(HAN2018).is_dir():
         print(f"no data at {HAN2018}; nothing to benchmark")
         return 0
-    every = 32 if args.quick else args.every
+    every = args.every = 32 if args.quick else args.every
     han19, glove13 = load_layout("han19"), load_layout("glove13")
     results = {}
     results["(a) han2018, Han protocol"] = evaluate(han19, han_groups(han19, every, HAN, 1), args.methods)
@@ -168,7 +176,7 @@ def set_speed(layout, frames: int = 20000) -> dict:
     seqs = han2018_sequences(layout, every=1, user="User1")
     markers = np.concatenate(seqs)[:frames]
     fr = corrupt_markers(markers, np.random.default_rng(0), HAN)
-    labeler = make_labeler("set", layout)
+    labeler = make_labeler("set", layout, model=CANDIDATES.get(("set", layout.name)))
     labeler.scores(fr.points[:512], fr.mask[:512])
     out = {}
     for batch in (128, 1024):
@@ -197,8 +205,9 @@ def write_report(results: dict, by_occ: dict, speed: dict, args) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    model = f" --set-model {args.set_model}" if args.set_model else ""
     lines = ["# Per-frame labeling accuracy", "",
-             f"`python benchmarks/per_frame.py --every {args.every}{' --quick' if args.quick else ''}` on "
+             f"`python benchmarks/per_frame.py --every {args.every}{' --quick' if args.quick else ''}{model}` on "
              f"{platform.machine()}, {platform.python_version()}. Metrics as defined in METHODS.md: accuracy = "
              "correct instances (frame x label) / instances; frames = share of frames with every label correct; "
              "ghost P/R = precision/recall of the null decision per observation; occl. P/R = precision/recall "
@@ -226,7 +235,8 @@ def write_report(results: dict, by_occ: dict, speed: dict, args) -> None:
               f"{speed['frames']:,} han2018 frames with Han's corruption, K = {speed['K']}.", "",
               "| stage | frames/s |", "|---|---|"]
     lines += [f"| {k} | {v:,.0f} |" for k, v in speed.items() if k not in ("frames", "K")]
-    out = ROOT / "benchmarks" / "reports" / "per_frame.md"
+    args.report.mkdir(parents=True, exist_ok=True)
+    out = args.report / "per_frame.md"
     out.write_text("\n".join(lines) + "\n")
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(13, 4.5))
@@ -247,7 +257,7 @@ def write_report(results: dict, by_occ: dict, speed: dict, args) -> None:
     ax2.set_title("(b) han2018 by occlusions")
     ax2.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(ROOT / "benchmarks" / "reports" / "per_frame.png", dpi=110)
+    fig.savefig(args.report / "per_frame.png", dpi=110)
     print(out.read_text())
 
 
