@@ -37,8 +37,9 @@ def recipe(method: str, layout: str) -> Recipe:
             # Tried and not adopted (stop 30, han2018 Han protocol, paired 4,000-step runs against
             # 88.10 %): width 64 / hidden 128 89.24 (at 10,000 steps 90.57 against the shipped 90.20,
             # 10-15 % slower, where the speed bar has no room); 24 distance bases 88.71; 12 neighbours
-            # 88.34; sign-fixed principal coordinates 88.11; drops 0-7 87.96; two label-query
-            # blocks 87.46; fewer (10 %) or more (40 %) uniform poses 87.26 / 87.50.
+            # 88.34 (both together at 12,000 steps: 90.33, clean frames 99.27 against 99.53);
+            # sign-fixed principal coordinates 88.11; drops 0-7 87.96; two label-query blocks
+            # 87.46; fewer (10 %) or more (40 %) uniform poses 87.26 / 87.50.
             frames = asdict(FrameConfig(**hands, placement_sd=0.003, tip_convergence=0.018))
             return Recipe(method="set", steps=12000, lr=6e-3, frames=frames, model={"layers": 4, "queries": 1})
         return Recipe(method="set", steps=6000, lr=6e-3, frames=asdict(FrameConfig(**hands)))
