@@ -154,7 +154,9 @@ def main() -> int:
     every = args.every = 32 if args.quick else args.every
     han19, glove13 = load_layout("han19"), load_layout("glove13")
     results = {}
-    results["(a) han2018, Han protocol"] = evaluate(han19, han_groups(han19, every, HAN, 1), args.methods)
+    han = han_groups(han19, every, HAN, 1)
+    results["(a) han2018, Han protocol"] = evaluate(han19, han, args.methods)
+    anatomy = error_anatomy(han19, han) if "set" in args.methods else None
     results["(a) han2018, clean"] = evaluate(
         han19, han_groups(han19, every, FrameConfig(drop=(0, 0), ghosts=(0, 0), distractor_share=0.0), 1), args.methods)
     by_occ = {}
@@ -166,7 +168,7 @@ def main() -> int:
     results["(c) synthetic glove13, held out"] = evaluate(glove13, synth_groups(glove13, takes, frames), args.methods)
     results["(d) glove13 real recording"] = evaluate(glove13, glove_groups(glove13), args.methods)
     speed = set_speed(han19)
-    write_report(results, by_occ, speed, args)
+    write_report(results, by_occ, speed, anatomy, args)
     return 0
 
 
@@ -195,11 +197,73 @@ def set_speed(layout, frames: int = 20000) -> dict:
     return out
 
 
+#: A ghost within this distance of a marker's true position counts as that marker's reflection
+#: (Han's protocol puts half of its ghosts 5-25 mm from a marker, the rest anywhere in the hand's box).
+NEAR_GHOST = 0.025
+
+
+def error_anatomy(layout, groups: list[Case]) -> dict:
+    """Where ``set`` goes wrong on Han-protocol frames: accuracy by ghosts x occluded markers, what
+    becomes of each kind of ghost, and the commonest confusions (true label -> given label)."""
+    m = len(layout)
+    frames = [fr for g in groups for fr in g.frames]
+    preds, _ = run_method("set", layout, frames, None)
+    right, ghosts, drops, fates, confusions = [], [], [], {}, {}
+    for fr, pred in zip(frames, preds):
+        pred = np.where(fr.mask, pred, -1)
+        given, true = per_label(pred, fr.mask, m), per_label(fr.labels, fr.mask, m)
+        ok = given == true
+        right.append(ok)
+        ghosts.append((fr.labels == -1).sum(axis=1))
+        drops.append((true < 0).sum(axis=1))
+        # Each ghost: its nearest marker (true position, dropped or not), and whether it got a label.
+        f, k = np.nonzero(fr.labels == -1)
+        d = np.linalg.norm(fr.markers[f] - fr.points[f, k][:, None], axis=2)
+        near = d.argmin(axis=1)
+        kind = np.where(d.min(axis=1) > NEAR_GHOST, "farther from every marker",
+                        np.where(true[f, near] >= 0, "within 25 mm of an observed marker",
+                                 "within 25 mm of an occluded marker"))
+        for name in np.unique(kind):
+            sel = kind == name
+            n, labeled, own = fates.get(name, (0, 0, 0))
+            fates[name] = (n + int(sel.sum()), labeled + int((pred[f, k][sel] >= 0).sum()),
+                           own + int((pred[f, k][sel] == near[sel]).sum()))
+        names = layout.names + ["empty"]
+        for r, j in zip(*np.nonzero(~ok & (true >= 0))):
+            got = pred[r, true[r, j]]
+            key = (names[j], names[got] if got >= 0 else "empty")
+            confusions[key] = confusions.get(key, 0) + 1
+    right, ghosts, drops = np.concatenate(right), np.concatenate(ghosts), np.concatenate(drops)
+    grid = {(g, c): 100 * right[(ghosts == g) & (drops == c)].mean() for g in range(3) for c in range(6)
+            if ((ghosts == g) & (drops == c)).any()}
+    rows = {g: 100 * right[ghosts == g].mean() for g in range(3) if (ghosts == g).any()}
+    top = sorted(confusions.items(), key=lambda kv: -kv[1])[:10]
+    return {"grid": grid, "rows": rows, "fates": fates, "confusions": top,
+            "errors": int((~right).sum()), "instances": int(right.size)}
+
+
+def _anatomy_lines(a: dict) -> list[str]:
+    lines = ["## Where `set` goes wrong under Han's protocol", "",
+             "The frames of (a), accuracy % by ghosts and occluded markers per frame:", "",
+             "| ghosts | all | " + " | ".join(f"{c} occluded" for c in range(6)) + " |", "|---" * 8 + "|"]
+    for g, acc in a["rows"].items():
+        lines.append(f"| {g} | {acc:.2f} | " + " | ".join(
+            f"{a['grid'][(g, c)]:.2f}" if (g, c) in a["grid"] else "" for c in range(6)) + " |")
+    lines += ["", "What becomes of the ghosts (own label: the ghost took the label of the marker nearest to it):",
+              "", "| ghost | ghosts | given a label % | given the nearest marker's own label % |", "|---|---|---|---|"]
+    for name, (n, labeled, own) in sorted(a["fates"].items()):
+        lines.append(f"| {name} | {n:,} | {100 * labeled / n:.1f} | {100 * own / n:.1f} |")
+    lines += ["", f"Commonest confusions of an observed marker ({a['errors']:,} wrong instances of "
+              f"{a['instances']:,}; 'empty': left unlabeled):", "", "| marker | given | instances |", "|---|---|---|"]
+    lines += [f"| {t} | {g} | {n:,} |" for (t, g), n in a["confusions"]]
+    return lines + [""]
+
+
 def _pct(x: float) -> str:
     return "n/a" if x != x else f"{100 * x:.2f}"
 
 
-def write_report(results: dict, by_occ: dict, speed: dict, args) -> None:
+def write_report(results: dict, by_occ: dict, speed: dict, anatomy: dict | None, args) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -231,7 +295,8 @@ def write_report(results: dict, by_occ: dict, speed: dict, args) -> None:
               "| occluded | " + " | ".join(methods) + " |", "|---" * (len(methods) + 1) + "|"]
     for c, res in by_occ.items():
         lines.append(f"| {c} | " + " | ".join(_pct(res["scores"][m][0].accuracy) for m in methods) + " |")
-    lines += ["", "## Speed of `set` (han19, batched ONNX inference, 2 cores)", "",
+    lines += [""] + (_anatomy_lines(anatomy) if anatomy else [])
+    lines += ["## Speed of `set` (han19, batched ONNX inference, 2 cores)", "",
               f"{speed['frames']:,} han2018 frames with Han's corruption, K = {speed['K']}.", "",
               "| stage | frames/s |", "|---|---|"]
     lines += [f"| {k} | {v:,.0f} |" for k, v in speed.items() if k not in ("frames", "K")]
