@@ -37,6 +37,7 @@ from mocap_autolabel.core.layout import load_layout  # noqa: E402
 from mocap_autolabel.core.metrics import data_set_stats, per_label, score_labeling  # noqa: E402
 from mocap_autolabel.core.synth.frames import FrameConfig, LabeledFrames, corrupt_markers  # noqa: E402
 from mocap_autolabel.core.synth.generate import synthesize  # noqa: E402
+from mocap_autolabel.core.temporal.murty import nbest_labelings  # noqa: E402
 
 METHODS = ("set", "perm", "cnn", "gmm", "nearest")
 HAN = FrameConfig(drop=(0, 5), ghosts=(0, 2), distractor_share=0.0)
@@ -200,6 +201,8 @@ def set_speed(layout, frames: int = 20000) -> dict:
 #: A ghost within this distance of a marker's true position counts as that marker's reflection
 #: (Han's protocol puts half of its ghosts 5-25 mm from a marker, the rest anywhere in the hand's box).
 NEAR_GHOST = 0.025
+#: How many of set's best labelings per frame the reranking ceiling looks at.
+NBEST = (1, 3, 10)
 
 
 def error_anatomy(layout, groups: list[Case]) -> dict:
@@ -209,7 +212,17 @@ def error_anatomy(layout, groups: list[Case]) -> dict:
     frames = [fr for g in groups for fr in g.frames]
     preds, _ = run_method("set", layout, frames, None)
     right, ghosts, drops, fates, confusions = [], [], [], {}, {}
+    labeler = make_labeler("set", layout, model=CANDIDATES.get(("set", layout.name)))
+    best_of = dict.fromkeys(NBEST, 0)
     for fr, pred in zip(frames, preds):
+        # A reranker of set's N best labelings (Murty) can at most pick the best of them.
+        scores = labeler.scores(fr.points, fr.mask)
+        for i in range(len(fr.points)):
+            ok, truth = fr.mask[i], per_label(fr.labels[i:i + 1], fr.mask[i:i + 1], m)[0]
+            hits = [int((per_label(h[None], np.ones((1, len(h)), bool), m)[0] == _valid_index(truth, ok)).sum())
+                    for _, h in nbest_labelings(scores[i][ok], max(NBEST))]
+            for n in NBEST:
+                best_of[n] += max(hits[:n])
         pred = np.where(fr.mask, pred, -1)
         given, true = per_label(pred, fr.mask, m), per_label(fr.labels, fr.mask, m)
         ok = given == true
@@ -238,8 +251,15 @@ def error_anatomy(layout, groups: list[Case]) -> dict:
             if ((ghosts == g) & (drops == c)).any()}
     rows = {g: 100 * right[ghosts == g].mean() for g in range(3) if (ghosts == g).any()}
     top = sorted(confusions.items(), key=lambda kv: -kv[1])[:10]
-    return {"grid": grid, "rows": rows, "fates": fates, "confusions": top,
+    best_of = {n: 100 * hit / right.size for n, hit in best_of.items()}
+    return {"grid": grid, "rows": rows, "fates": fates, "confusions": top, "best_of": best_of,
             "errors": int((~right).sum()), "instances": int(right.size)}
+
+
+def _valid_index(holder: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Each label's observation ``(M,)`` (index among all K) renumbered among the valid ones only."""
+    rank = np.cumsum(ok) - 1
+    return np.where(holder >= 0, rank[np.maximum(holder, 0)], -1)
 
 
 def _anatomy_lines(a: dict) -> list[str]:
@@ -256,6 +276,10 @@ def _anatomy_lines(a: dict) -> list[str]:
     lines += ["", f"Commonest confusions of an observed marker ({a['errors']:,} wrong instances of "
               f"{a['instances']:,}; 'empty': left unlabeled):", "", "| marker | given | instances |", "|---|---|---|"]
     lines += [f"| {t} | {g} | {n:,} |" for (t, g), n in a["confusions"]]
+    lines += ["", "Best of `set`'s N best labelings per frame (Murty on its scores), picked with the truth: the "
+              "most a reranker of them (an IK check, a second network) could reach, accuracy %:", "",
+              "| N | " + " | ".join(str(n) for n in a["best_of"]) + " |", "|---" * (len(a["best_of"]) + 1) + "|",
+              "| accuracy | " + " | ".join(f"{v:.2f}" for v in a["best_of"].values()) + " |"]
     return lines + [""]
 
 
