@@ -39,7 +39,10 @@ def recipe(method: str, layout: str) -> Recipe:
             # 10-15 % slower, where the speed bar has no room); 24 distance bases 88.71; 12 neighbours
             # 88.34 (both together at 12,000 steps: 90.33, clean frames 99.27 against 99.53);
             # sign-fixed principal coordinates 88.11; drops 0-7 87.96; two label-query blocks
-            # 87.46; fewer (10 %) or more (40 %) uniform poses 87.26 / 87.50.
+            # 87.46; fewer (10 %) or more (40 %) uniform poses 87.26 / 87.50. Stop 31, same protocol:
+            # fingers spread together (one abduction level per pose, mostly closed) 87.46, and with
+            # neighbours' flexion coupled in the uniform poses 87.85, although both bring adjacent-finger
+            # distances nearer han2018's (synthetic fingers sit further apart and vary 2-3x more).
             frames = asdict(FrameConfig(**hands, placement_sd=0.003, tip_convergence=0.018))
             return Recipe(method="set", steps=12000, lr=6e-3, frames=frames, model={"layers": 4, "queries": 1})
         return Recipe(method="set", steps=6000, lr=6e-3, frames=asdict(FrameConfig(**hands)))
