@@ -207,23 +207,16 @@ NBEST = (1, 3, 10)
 
 def error_anatomy(layout, groups: list[Case]) -> dict:
     """Where ``set`` goes wrong on Han-protocol frames: accuracy by ghosts x occluded markers, what
-    becomes of each kind of ghost, and the commonest confusions (true label -> given label)."""
+    becomes of each kind of ghost, the commonest confusions (true label -> given label), and the
+    best of its N best labelings per frame (the ceiling of any reranker of them)."""
     m = len(layout)
-    frames = [fr for g in groups for fr in g.frames]
-    preds, _ = run_method("set", layout, frames, None)
-    right, ghosts, drops, fates, confusions = [], [], [], {}, {}
+    names = layout.names + ["empty"]
     labeler = make_labeler("set", layout, model=CANDIDATES.get(("set", layout.name)))
+    right, ghosts, drops, fates, confusions = [], [], [], {}, {}
     best_of = dict.fromkeys(NBEST, 0)
-    for fr, pred in zip(frames, preds):
-        # A reranker of set's N best labelings (Murty) can at most pick the best of them.
+    for fr in (fr for g in groups for fr in g.frames):
         scores = labeler.scores(fr.points, fr.mask)
-        for i in range(len(fr.points)):
-            ok, truth = fr.mask[i], per_label(fr.labels[i:i + 1], fr.mask[i:i + 1], m)[0]
-            hits = [int((per_label(h[None], np.ones((1, len(h)), bool), m)[0] == _valid_index(truth, ok)).sum())
-                    for _, h in nbest_labelings(scores[i][ok], max(NBEST))]
-            for n in NBEST:
-                best_of[n] += max(hits[:n])
-        pred = np.where(fr.mask, pred, -1)
+        pred = np.where(fr.mask, assign(scores, fr.mask)[0], -1)
         given, true = per_label(pred, fr.mask, m), per_label(fr.labels, fr.mask, m)
         ok = given == true
         right.append(ok)
@@ -241,25 +234,25 @@ def error_anatomy(layout, groups: list[Case]) -> dict:
             n, labeled, own = fates.get(name, (0, 0, 0))
             fates[name] = (n + int(sel.sum()), labeled + int((pred[f, k][sel] >= 0).sum()),
                            own + int((pred[f, k][sel] == near[sel]).sum()))
-        names = layout.names + ["empty"]
         for r, j in zip(*np.nonzero(~ok & (true >= 0))):
             got = pred[r, true[r, j]]
-            key = (names[j], names[got] if got >= 0 else "empty")
+            key = (names[j], names[got])  # names[-1]: left empty
             confusions[key] = confusions.get(key, 0) + 1
+        for i in range(len(fr.points)):
+            hypothesis, hits = np.full(fr.mask.shape[1], -1), []
+            for _, h in nbest_labelings(scores[i][fr.mask[i]], max(NBEST)):
+                hypothesis[fr.mask[i]] = h
+                hits.append(int((per_label(hypothesis[None], fr.mask[i:i + 1], m)[0] == true[i]).sum()))
+            for n in NBEST:
+                best_of[n] += max(hits[:n])
     right, ghosts, drops = np.concatenate(right), np.concatenate(ghosts), np.concatenate(drops)
     grid = {(g, c): 100 * right[(ghosts == g) & (drops == c)].mean() for g in range(3) for c in range(6)
             if ((ghosts == g) & (drops == c)).any()}
     rows = {g: 100 * right[ghosts == g].mean() for g in range(3) if (ghosts == g).any()}
     top = sorted(confusions.items(), key=lambda kv: -kv[1])[:10]
-    best_of = {n: 100 * hit / right.size for n, hit in best_of.items()}
-    return {"grid": grid, "rows": rows, "fates": fates, "confusions": top, "best_of": best_of,
+    return {"grid": grid, "rows": rows, "fates": fates, "confusions": top,
+            "best_of": {n: 100 * hit / right.size for n, hit in best_of.items()},
             "errors": int((~right).sum()), "instances": int(right.size)}
-
-
-def _valid_index(holder: np.ndarray, ok: np.ndarray) -> np.ndarray:
-    """Each label's observation ``(M,)`` (index among all K) renumbered among the valid ones only."""
-    rank = np.cumsum(ok) - 1
-    return np.where(holder >= 0, rank[np.maximum(holder, 0)], -1)
 
 
 def _anatomy_lines(a: dict) -> list[str]:
