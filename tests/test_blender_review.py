@@ -305,7 +305,8 @@ def test_errors_are_clear(labeled):
 
 def test_a_file_that_names_its_points_gives_labeled_empties_the_plain_names(empty_scene, bpy_module, tmp_path):
     """A labeled file's points import under the label names; labeling moves them into Raw as
-    "<name> (raw)", so the labeled empties are "BackHand1", not "BackHand1.001"."""
+    "<name> (raw)", so the labeled empties are "BackHand1", not "BackHand1.001", and the
+    unlabeled ones "*20", not "*20.001"."""
     import dataclasses
 
     from mocap_autolabel.blender.review import RAW_SUFFIX
@@ -327,6 +328,37 @@ def test_a_file_that_names_its_points_gives_labeled_empties_the_plain_names(empt
     raw = {o["mocap_point"]: o.name for o in coll["mocap_raw"].objects}
     assert all(raw[n] == n + RAW_SUFFIX for n in layout.names if n in raw)
     assert sum(n in raw for n in layout.names) == min(len(layout), len(take.names))
+    # The unlabeled empties keep their slots' plain names too ("*20", not "*20.001").
+    unlabeled = [(o.name, f"*{o['mocap_null']}") for o in coll["mocap_unlabeled"].objects]
+    assert unlabeled and all(name == point for name, point in unlabeled)
+
+
+def test_the_panel_labels_with_the_command_lines_default_layout(empty_scene):
+    """A user who imports a take and presses Label gets the layout the CLI uses by default (han19),
+    not the first layout by name."""
+    from mocap_autolabel.cli import build_parser
+    from mocap_autolabel.core.layout import DEFAULT_LAYOUT
+
+    assert build_parser().parse_args(["label", "take.c3d"]).layout == DEFAULT_LAYOUT
+    assert empty_scene.mocap_autolabel.layout == DEFAULT_LAYOUT
+
+
+def test_solve_hand_fits_the_reviewed_labels(labeled, tmp_path):
+    """Solve Hand after Label (step 9 of the README) solves the labels in the scene, with the layout
+    they were made with: the raw file on disk (unlabeled) is neither needed nor read."""
+    from mocap_autolabel.blender import animio
+
+    bpy, coll = labeled
+    (tmp_path / "syn.c3d").unlink()
+    _select(bpy, next(iter(labeled_objects(coll).values())))
+    before = set(bpy.data.objects)
+    assert bpy.ops.mocap_autolabel.solve_hand(layout="glove13") == {"FINISHED"}  # the take's own layout wins
+    added = set(bpy.data.objects) - before
+    arm = next(o for o in added if o.type == "ARMATURE")
+    assert {len(fc.keyframe_points) for fc in animio.fcurves_of(arm)} == {FRAMES}
+    markers = next(o for o in added if "marker_names" in o)
+    assert list(markers["marker_names"]) == load_layout("han19").names
+    assert arm["mocap_marker_rms_mm"] < 8.0
 
 
 def test_label_needs_a_take(empty_scene, bpy_module):

@@ -199,23 +199,19 @@ def _null_objects(coll: bpy.types.Collection) -> dict[int, bpy.types.Object]:
 RAW_SUFFIX = " (raw)"
 
 
-def _hide_raw(take_coll: bpy.types.Collection, labels: list[str]) -> None:
-    """Move the imported empties into a hidden "Raw" child: the labeled and unlabeled empties
-    now show every sample, each once.
-
-    A file that already names its points (a labeled TRC or C3D) gave the imported empties the
-    label names; those get :data:`RAW_SUFFIX`, so that the labeled empties take the plain names
-    (Blender names are unique per file: the labeled ``BackHand1`` would be ``BackHand1.001``).
-    The point's own name stays in ``mocap_point``.
+def _hide_raw(take_coll: bpy.types.Collection) -> None:
+    """Move the imported empties into a hidden "Raw" child as ``<name> (raw)``: the labeled and
+    unlabeled empties now show every sample, each once, and take the plain names (Blender names
+    are unique per file: an unlabeled ``*3``, or a labeled ``BackHand1`` where the file already
+    named its points, would otherwise be ``*3.001`` or ``BackHand1.001``). The point's own name
+    stays in ``mocap_point``.
     """
     raw = _child(take_coll, "mocap_raw", "Raw")
-    taken = set(labels)
     for obj in list(take_coll.objects):
         if "mocap_slot" in obj:
             raw.objects.link(obj)
             take_coll.objects.unlink(obj)
-            if obj.name in taken:
-                obj.name = obj.name + RAW_SUFFIX
+            obj.name = obj.name + RAW_SUFFIX
     raw.hide_viewport = raw.hide_render = True
 
 
@@ -230,7 +226,7 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
     Returns:
         counts of rewritten labeled and unlabeled empties.
     """
-    _hide_raw(take_coll, layout.names)
+    _hide_raw(take_coll)
     labeled = _child(take_coll, "mocap_labeled", "Labeled")
     unlabeled = _child(take_coll, "mocap_unlabeled", "Unlabeled")
     scale = float(take_coll.get("mocap_scale", 1.0))

@@ -116,10 +116,15 @@ class Layout:
         return Binding(np.array(rest), np.array(bones), np.array(weights)), np.array(normals)
 
 
+#: The layout used where none is named (CLI, batch, the Blender panel): Han's dense 19-marker glove.
+DEFAULT_LAYOUT = "han19"
+
+
 def builtin_layouts() -> list[str]:
-    """Names of the layouts that ship with the package."""
+    """Names of the layouts that ship with the package, :data:`DEFAULT_LAYOUT` first, then by name."""
     folder = resources.files(__package__) / "layouts"
-    return sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
+    names = sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
+    return sorted(names, key=lambda name: name != DEFAULT_LAYOUT)
 
 
 def load_layout(name_or_path: str | os.PathLike) -> Layout:

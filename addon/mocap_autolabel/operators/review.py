@@ -16,7 +16,7 @@ from bpy_extras.io_utils import ExportHelper
 from ..blender.properties import TEMPORAL_ITEMS, _layouts, _methods
 
 
-def _take(context) -> bpy.types.Collection | None:
+def context_take(context) -> bpy.types.Collection | None:
     from ..blender.review import take_collection
 
     found = take_collection(context.active_object) if context.active_object else None
@@ -26,10 +26,10 @@ def _take(context) -> bpy.types.Collection | None:
     return found
 
 
-def _reviewed(context):
+def reviewed_take(context):
     from ..blender.review import has_review
 
-    coll = _take(context)
+    coll = context_take(context)
     return coll if has_review(coll) else None
 
 
@@ -49,13 +49,13 @@ class _ReviewOperator:
 
     @classmethod
     def poll(cls, context):
-        return _present(cls, _reviewed(context), "Label a take first (Mocap sidebar tab > Label)")
+        return _present(cls, reviewed_take(context), "Label a take first (Mocap sidebar tab > Label)")
 
     def execute(self, context):
         from ..blender.review import load_state
         from ..core.errors import MocapInputError
 
-        coll = _reviewed(context)
+        coll = reviewed_take(context)
         try:
             message = self.apply(context, coll, load_state(coll))
         except (MocapInputError, ValueError) as exc:
@@ -125,7 +125,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return _present(cls, _take(context),
+        return _present(cls, context_take(context),
                         "Import a take first (File > Import > C3D Markers), or select one of its markers")
 
     def _request(self, context):
@@ -134,7 +134,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         settings = context.scene.mocap_autolabel
         src = settings if self.use_scene_settings else self
         layout = bpy.path.abspath(src.layout_file) if src.layout_file else src.layout
-        return prepare_label(_take(context), layout, src.method, src.temporal)
+        return prepare_label(context_take(context), layout, src.method, src.temporal)
 
     def _fail(self, exc: Exception, coll_name: str) -> set[str]:
         from ..core.errors import MocapInputError
@@ -163,7 +163,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         return {"FINISHED"}
 
     def execute(self, context):
-        coll_name = _take(context).name
+        coll_name = context_take(context).name
         try:
             request = self._request(context)
             labeling = request.run(_printer() if bpy.app.background else None)
@@ -174,7 +174,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
     def invoke(self, context, event):
         from ..core.jobs import Job
 
-        coll_name = _take(context).name
+        coll_name = context_take(context).name
         try:
             self._pending = self._request(context)
         except Exception as exc:
@@ -230,7 +230,7 @@ class MOCAPAL_OT_resolve(_ReviewOperator, bpy.types.Operator):
 def _label_items(self, context):
     from ..blender.review import load_state
 
-    coll = _reviewed(context)
+    coll = reviewed_take(context)
     names = load_state(coll).labeling.names if coll is not None else []
     items = [(str(i), name, f"Label {name}") for i, name in enumerate(names)]
     _label_items.cache = items  # Blender keeps no reference to dynamic enum strings
@@ -333,7 +333,7 @@ class MOCAPAL_OT_next_uncertain(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return _reviewed(context) is not None
+        return reviewed_take(context) is not None
 
     def execute(self, context):
         import numpy as np
@@ -341,7 +341,7 @@ class MOCAPAL_OT_next_uncertain(bpy.types.Operator):
         from ..blender.review import load_state, sample_index
         from ..core.review import uncertain_segments
 
-        coll = _reviewed(context)
+        coll = reviewed_take(context)
         lab = load_state(coll).labeling
         sure = context.scene.mocap_autolabel.sure
         idx = uncertain_segments(lab, sure)
@@ -382,7 +382,7 @@ class MOCAPAL_OT_jump_to_segment(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return _reviewed(context) is not None
+        return reviewed_take(context) is not None
 
     def execute(self, context):
         import numpy as np
@@ -393,7 +393,7 @@ class MOCAPAL_OT_jump_to_segment(bpy.types.Operator):
         if self.index >= len(settings.uncertain):
             return {"CANCELLED"}
         item = settings.uncertain[self.index]
-        coll = _reviewed(context)
+        coll = reviewed_take(context)
         lab = load_state(coll).labeling
         start = item.frame_start - first_frame(coll)
         seg = np.flatnonzero((lab.slot == item.slot) & (lab.start == start))
@@ -417,10 +417,10 @@ class MOCAPAL_OT_export_labeled(bpy.types.Operator, ExportHelper):
 
     @classmethod
     def poll(cls, context):
-        return _reviewed(context) is not None
+        return reviewed_take(context) is not None
 
     def invoke(self, context, event):
-        coll = _reviewed(context)
+        coll = reviewed_take(context)
         if not self.filepath and coll is not None:
             src = coll.get("mocap_source") or coll.name
             self.filepath = os.path.splitext(bpy.path.abspath(src) if src else coll.name)[0] + "_labeled.c3d"
@@ -432,7 +432,7 @@ class MOCAPAL_OT_export_labeled(bpy.types.Operator, ExportHelper):
         from ..core.formats.c3d import write_c3d
         from ..core.labeling import labeled_take
 
-        coll = _reviewed(context)
+        coll = reviewed_take(context)
         path = bpy.path.abspath(self.filepath)
         try:
             write_c3d(labeled_take(current_take(coll), load_state(coll).labeling), path)

@@ -7,11 +7,8 @@ import os
 import bpy
 from bpy.props import EnumProperty, FloatProperty, StringProperty
 
-
-def _layouts(_self, _context):
-    from ..core.layout import builtin_layouts
-
-    return [(name, name, f"Built-in layout {name}") for name in builtin_layouts()]
+from ..blender.properties import _layouts
+from .review import context_take, reviewed_take
 
 
 class MOCAPAL_OT_solve_hand(bpy.types.Operator):
@@ -23,8 +20,10 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     filepath: StringProperty(name="Labeled Take", subtype="FILE_PATH",
-                             description="Labeled take to solve (default: the file of the active marker's take)")
-    layout: EnumProperty(name="Layout", items=_layouts, description="Marker layout of the take")
+                             description="Labeled take to solve (default: the reviewed labels of the active "
+                                         "marker's take, or its file when it was imported labeled)")
+    layout: EnumProperty(name="Layout", items=_layouts, description="Marker layout of a labeled file "
+                         "(a reviewed take keeps the layout it was labeled with)")
     layout_file: StringProperty(name="Layout File", subtype="FILE_PATH",
                                 description="A layout .toml instead of a built-in layout")
     calibration: StringProperty(name="Calibration", subtype="FILE_PATH",
@@ -34,14 +33,29 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
     smooth_hz: FloatProperty(name="Smoothing (Hz)", default=10.0, min=0.0, soft_max=30.0,
                              description="Low-pass cut-off of the pose track; 0 keeps every frame's own fit")
 
-    def _source(self, context) -> str:
+    def _labeled(self, context):
+        """``(take, layout, name)`` to solve, or None: the file given; else the reviewed take of the
+        active marker (or of the panel) with its current labels, corrections included, and the layout
+        it was labeled with; else the file of the active marker's take (an imported labeled file)."""
+        from ..blender.review import current_take, load_state, state_layout
+        from ..core.labeling import labeled_take
+        from ..core.layout import load_layout
+        from ..core.take import read_take
+
+        def chosen_layout():
+            return load_layout(bpy.path.abspath(self.layout_file) if self.layout_file else self.layout)
+
         if self.filepath:
-            return bpy.path.abspath(self.filepath)
-        obj = context.active_object
-        for coll in (obj.users_collection if obj else ()):
-            if coll.get("mocap_source"):
-                return coll["mocap_source"]
-        return ""
+            path = bpy.path.abspath(self.filepath)
+            return read_take(path), chosen_layout(), path
+        coll = reviewed_take(context)
+        if coll is not None:
+            state = load_state(coll)
+            return labeled_take(current_take(coll), state.labeling), state_layout(state), coll.name
+        coll = context_take(context)
+        if coll is not None and coll.get("mocap_source"):
+            return read_take(coll["mocap_source"]), chosen_layout(), coll["mocap_source"]
+        return None
 
     def invoke(self, context, event):
         return context.window_manager.invoke_props_dialog(self)
@@ -50,18 +64,18 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         from ..blender.armature import build_solved_hand
         from ..core.errors import MocapInputError
         from ..core.hand.calibrate import Calibration
-        from ..core.layout import load_layout
         from ..core.pipeline import solve_take
-        from ..core.take import read_take
 
-        source = self._source(context)
-        if not source:
-            self.report({"ERROR"}, "No labeled take: give a file, or select a marker of an imported take")
-            return {"CANCELLED"}
+        source = self.filepath or "the take"
         try:
-            layout = load_layout(bpy.path.abspath(self.layout_file) if self.layout_file else self.layout)
+            found = self._labeled(context)
+            if found is None:
+                self.report({"ERROR"}, "No labeled take: label the imported take, select one of its markers, "
+                                       "or give a labeled file")
+                return {"CANCELLED"}
+            take, layout, source = found
             calibration = Calibration.load(bpy.path.abspath(self.calibration)) if self.calibration else None
-            solved = solve_take(read_take(source), layout, calibration=calibration, smooth_hz=self.smooth_hz)
+            solved = solve_take(take, layout, calibration=calibration, smooth_hz=self.smooth_hz)
             if self.save_calibration:
                 solved.calibration.save(bpy.path.abspath(self.save_calibration))
         except MocapInputError as exc:
