@@ -17,6 +17,7 @@ from bpy.props import (
     StringProperty,
 )
 
+from ..core.layout import DEFAULT_LAYOUT, builtin_layouts
 from ..core.review import SURE, uncertain_segments
 
 #: How many uncertain segments the list holds at most (worst first).
@@ -29,9 +30,12 @@ TEMPORAL_ITEMS = [("vote", "Trajectory voting", "Decide per tracklet (default)")
 
 
 def _layouts(_self, _context):
-    from ..core.layout import builtin_layouts
-
     return [(name, name, f"Built-in layout {name}") for name in builtin_layouts()]
+
+
+#: The layout enums' default: the command line's (han19), not the first by name. A dynamic enum
+#: takes its default as the item's number, which is its place in the list.
+LAYOUT_DEFAULT = builtin_layouts().index(DEFAULT_LAYOUT)
 
 
 def _methods(_self, _context):
@@ -67,7 +71,8 @@ class MOCAPAL_PG_uncertain(bpy.types.PropertyGroup):
 class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     take: PointerProperty(type=bpy.types.Collection, name="Take", update=_take_changed,
                           description="The imported take to label and review")
-    layout: EnumProperty(name="Layout", items=_layouts, description="Marker layout to label with")
+    layout: EnumProperty(name="Layout", items=_layouts, default=LAYOUT_DEFAULT,
+                         description="Marker layout to label with")
     layout_file: StringProperty(name="Layout File", subtype="FILE_PATH",
                                 description="A layout .toml instead of a built-in layout")
     method: EnumProperty(name="Method", items=_methods, description="Per-frame labeler (set: ours, the default)")

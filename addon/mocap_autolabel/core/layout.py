@@ -121,10 +121,10 @@ DEFAULT_LAYOUT = "han19"
 
 
 def builtin_layouts() -> list[str]:
-    """Names of the layouts that ship with the package, :data:`DEFAULT_LAYOUT` first, then by name."""
+    """Names of the layouts that ship with the package, by name (Blender stores a layout choice
+    as its place in this list)."""
     folder = resources.files(__package__) / "layouts"
-    names = sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
-    return sorted(names, key=lambda name: name != DEFAULT_LAYOUT)
+    return sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
 def load_layout(name_or_path: str | os.PathLike) -> Layout:

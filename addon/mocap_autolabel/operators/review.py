@@ -13,7 +13,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from ..blender.properties import TEMPORAL_ITEMS, _layouts, _methods
+from ..blender.properties import LAYOUT_DEFAULT, TEMPORAL_ITEMS, _layouts, _methods
 
 
 def context_take(context) -> bpy.types.Collection | None:
@@ -115,7 +115,8 @@ class MOCAPAL_OT_label(bpy.types.Operator):
     bl_label = "Label Markers"
     bl_options = {"REGISTER", "UNDO"}
 
-    layout: EnumProperty(name="Layout", items=_layouts, description="Marker layout to label with")
+    layout: EnumProperty(name="Layout", items=_layouts, default=LAYOUT_DEFAULT,
+                         description="Marker layout to label with")
     layout_file: StringProperty(name="Layout File", subtype="FILE_PATH",
                                 description="A layout .toml instead of a built-in layout")
     method: EnumProperty(name="Method", items=_methods, description="Per-frame labeler")

@@ -7,7 +7,7 @@ import os
 import bpy
 from bpy.props import EnumProperty, FloatProperty, StringProperty
 
-from ..blender.properties import _layouts
+from ..blender.properties import LAYOUT_DEFAULT, _layouts
 from .review import context_take, reviewed_take
 
 
@@ -22,8 +22,9 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
     filepath: StringProperty(name="Labeled Take", subtype="FILE_PATH",
                              description="Labeled take to solve (default: the reviewed labels of the active "
                                          "marker's take, or its file when it was imported labeled)")
-    layout: EnumProperty(name="Layout", items=_layouts, description="Marker layout of a labeled file "
-                         "(a reviewed take keeps the layout it was labeled with)")
+    layout: EnumProperty(name="Layout", items=_layouts, default=LAYOUT_DEFAULT,
+                         description="Marker layout of a labeled file (a reviewed take keeps the layout it was "
+                                     "labeled with)")
     layout_file: StringProperty(name="Layout File", subtype="FILE_PATH",
                                 description="A layout .toml instead of a built-in layout")
     calibration: StringProperty(name="Calibration", subtype="FILE_PATH",
