@@ -17,6 +17,7 @@ from ..blender.properties import LAYOUT_DEFAULT, TEMPORAL_ITEMS, _layouts, _meth
 
 
 def context_take(context) -> bpy.types.Collection | None:
+    """The take an operator works on: the active marker's, else the one in the panel's Take field."""
     from ..blender.review import take_collection
 
     found = take_collection(context.active_object) if context.active_object else None
@@ -26,7 +27,8 @@ def context_take(context) -> bpy.types.Collection | None:
     return found
 
 
-def reviewed_take(context):
+def reviewed_take(context) -> bpy.types.Collection | None:
+    """:func:`context_take` where it has been labeled (holds a review), else None."""
     from ..blender.review import has_review
 
     coll = context_take(context)
