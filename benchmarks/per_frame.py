@@ -226,9 +226,9 @@ def error_anatomy(layout, groups: list[Case]) -> dict:
         f, k = np.nonzero(fr.labels == -1)
         d = np.linalg.norm(fr.markers[f] - fr.points[f, k][:, None], axis=2)
         near = d.argmin(axis=1)
+        within = f"within {NEAR_GHOST * 1000:.0f} mm of an"
         kind = np.where(d.min(axis=1) > NEAR_GHOST, "farther from every marker",
-                        np.where(true[f, near] >= 0, "within 25 mm of an observed marker",
-                                 "within 25 mm of an occluded marker"))
+                        np.where(true[f, near] >= 0, f"{within} observed marker", f"{within} occluded marker"))
         for name in np.unique(kind):
             sel = kind == name
             n, labeled, own = fates.get(name, (0, 0, 0))

@@ -334,12 +334,15 @@ def test_a_file_that_names_its_points_gives_labeled_empties_the_plain_names(empt
 
 
 def test_the_panel_labels_with_the_command_lines_default_layout(empty_scene):
-    """A user who imports a take and presses Label gets the layout the CLI uses by default (han19),
-    not the first layout by name."""
+    """A user who imports a take and presses Label gets the layout the CLI and batch use by default
+    (han19), not the first layout by name. (cli.py and batch.py import only the standard library
+    at module level, so they spell the name out; this keeps the three in step.)"""
+    from mocap_autolabel.batch import BatchSettings
     from mocap_autolabel.cli import build_parser
     from mocap_autolabel.core.layout import DEFAULT_LAYOUT
 
     assert build_parser().parse_args(["label", "take.c3d"]).layout == DEFAULT_LAYOUT
+    assert BatchSettings().layout == DEFAULT_LAYOUT
     assert empty_scene.mocap_autolabel.layout == DEFAULT_LAYOUT
 
 
