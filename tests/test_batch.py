@@ -96,6 +96,25 @@ def test_mixed_folder_gives_the_right_outcome_per_file(tmp_path, capsys):
     assert "2 ok, 5 failed, 0 skipped" in printed
 
 
+def test_a_take_of_another_layout_is_flagged_or_refused_with_the_right_layout(tmp_path, capsys):
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, takes / "glove.c3d")
+    out = tmp_path / "out"
+    assert main(["batch", str(takes), "-o", str(out), "--config", os.devnull, "--quiet"]) == 0  # han19
+    row = json.loads((out / "summary.json").read_text())["takes_detail"][0]
+    assert row["status"] == "ok" and "is this a glove13 take?" in row["warning"]
+    assert "is this a glove13 take?" in json.loads((out / "glove.report.json").read_text())["warning"]
+    assert "warning" in (out / "summary.csv").read_text().splitlines()[0]
+    printed = capsys.readouterr().out
+    assert "ok !" in printed and "! glove: only" in printed
+    write_c3d(synthesize(load_layout("han19"), 300, seed=1).take, takes / "glove.c3d")  # now a han19 take
+    assert main(["batch", str(takes), "-o", str(out), "--config", os.devnull, "--quiet", "--layout", "glove13",
+                 "--force"]) == 1
+    row = json.loads((out / "summary.json").read_text())["takes_detail"][0]
+    assert "no hand found" in row["error"] and "'han19' fits better: use --layout han19" in row["error"]
+
+
 def test_killed_run_resumes_without_redoing_finished_takes(tmp_path):
     takes = tmp_path / "takes"
     _synthetic(takes, 4, frames=1500)

@@ -346,6 +346,25 @@ def test_the_panel_labels_with_the_command_lines_default_layout(empty_scene):
     assert empty_scene.mocap_autolabel.layout == DEFAULT_LAYOUT
 
 
+def test_labeling_with_the_wrong_layout_says_which_fits(labeled):
+    """The han19 take labeled with glove13: the panel's summary names han19, a re-solve keeps the
+    warning, and labeling with han19 clears it."""
+    from mocap_autolabel.blender.review import summary
+
+    bpy, coll = labeled
+    settings = bpy.context.scene.mocap_autolabel
+    assert summary(state(coll).labeling, settings.sure)["layout_doubt"] is None
+    settings.layout = "glove13"
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    doubt = summary(state(coll).labeling, settings.sure)["layout_doubt"]
+    assert "with layout 'glove13'" in doubt and doubt.endswith("is this a han19 take?")
+    assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
+    assert summary(state(coll).labeling, settings.sure)["layout_doubt"] == doubt
+    settings.layout = "han19"
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    assert summary(state(coll).labeling, settings.sure)["layout_doubt"] is None
+
+
 def test_solve_hand_fits_the_reviewed_labels(labeled, tmp_path):
     """Solve Hand after Label (step 9 of the README) solves the labels in the scene, with the layout
     they were made with: the raw file on disk (unlabeled) is neither needed nor read."""

@@ -100,6 +100,19 @@ def test_label_demo_take_writes_labeled_c3d_report_and_labels(capsys, tmp_path):
     assert saved["labels"].shape == saved["confidence"].shape == (1200, raw.n_points)
 
 
+def test_label_with_the_wrong_layout_warns_and_names_the_right_one(capsys, tmp_path):
+    demo = ROOT / "samples" / "demo_take.c3d"  # a han19 take
+    report = tmp_path / "report.json"
+    assert main(["label", str(demo), "--layout", "glove13", "--report", str(report)]) == 0
+    text = capsys.readouterr().out
+    assert "warning  only 0.0 % of labeled samples are confident with layout 'glove13'" in text
+    assert "is this a han19 take? (--layout han19)" in text
+    assert "is this a han19 take?" in json.loads(report.read_text())["info"]["layout_doubt"]
+    assert main(["label", str(demo), "--report", str(report)]) == 0
+    assert "warning" not in capsys.readouterr().out
+    assert "layout_doubt" not in json.loads(report.read_text())["info"]
+
+
 def test_label_script_mode_writes_c3d(tmp_path):
     out = tmp_path / "labeled.c3d"
     result = _script("label", str(ROOT / "samples" / "demo_take.c3d"), "--temporal", "none", "-o", str(out))

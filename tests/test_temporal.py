@@ -11,7 +11,7 @@ from mocap_autolabel.core.errors import MocapInputError
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint, labeled_take, segments_from_runs
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import segments_right
-from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.pipeline import DOUBTFUL_SHARE, label_take, layout_doubt
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
 from mocap_autolabel.core.temporal.confidence import (
@@ -181,6 +181,29 @@ def test_label_take_uses_the_shipped_vote_settings_unless_given_them():
     assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0] and info["partner"] == [0.0, 0.0]
     for load in (load_null_prior, load_switch_cost, load_partner):
         assert load("set", "vote", "no_such_layout") == (0.0, 0.0)
+
+
+@pytest.mark.parametrize(("glove", "chosen"), [("han19", "glove13"), ("glove13", "han19")])
+def test_a_take_labeled_with_the_wrong_layout_names_the_right_one(glove, chosen):
+    take = synthesize(load_layout(glove), 600, seed=3).take
+    wrong = label_take(take, load_layout(chosen))
+    doubt = layout_doubt(take, load_layout(chosen), wrong)
+    assert doubt is not None and doubt.layout == chosen and doubt.better == glove
+    assert doubt.share == wrong.summary()["confident_share"] < DOUBTFUL_SHARE <= doubt.better_share
+    assert f"is this a {glove} take?" in str(doubt)
+    right = label_take(take, load_layout(glove))
+    assert layout_doubt(take, load_layout(glove), right) is None
+
+
+def test_a_low_confidence_alone_raises_no_layout_doubt():
+    """Short right takes can score low (8 of han2018's 316 raw takes: 20-49 %): no other layout
+    does clearly better there, so nothing is said."""
+    layout = load_layout("han19")
+    take = synthesize(layout, 600, seed=3).take
+    labeling = label_take(take, layout)
+    labeling.confidence[:] = 0.5  # as doubtful as a wrong layout, but glove13 fits no better
+    assert labeling.summary()["confident_share"] == 0.0
+    assert layout_doubt(take, layout, labeling) is None
 
 
 def test_exclusivity_is_an_assignment_not_greedy():

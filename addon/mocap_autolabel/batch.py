@@ -210,7 +210,7 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     from .core.formats.c3d import write_c3d
     from .core.labeling import labeled_take
     from .core.layout import load_layout
-    from .core.pipeline import label_take, solve_take
+    from .core.pipeline import label_take, layout_doubt, solve_take
     from .core.take import read_take
 
     t = time.perf_counter()
@@ -229,13 +229,18 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     timings["label"] = round(time.perf_counter() - t, 4)
     labeled = labeled_take(take, labeling)
     hand_frames = _hand_frames(labeled.positions[:, :len(layout)], _believed(labeling, len(layout)))
+    doubt = layout_doubt(take, layout, labeling, settings.confident)
     if hand_frames < HAND_FRAMES:
+        hint = f"'{doubt.better}' fits better: use --layout {doubt.better}" if doubt else \
+            f"is this a {layout.name} take?"
         raise MocapInputError(path, f"no hand found: only {100 * hand_frames:.0f} % of frames have half of the "
                                     f"{layout.name} markers labeled with some confidence within {HAND_REACH:g} m "
-                                    f"of each other (is this a {layout.name} take?)")
+                                    f"of each other ({hint})")
     out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
            "hand_frames": round(hand_frames, 4), "summary": labeling.summary(settings.confident),
            "outputs": {}}
+    if doubt:
+        out["warning"] = str(doubt)
     t = time.perf_counter()
     target = os.path.join(out_dir, name + ".labeled.c3d")
     write_c3d(labeled, target)
@@ -401,7 +406,8 @@ def _row(report: dict, skipped: bool) -> dict:
     summary = report.get("summary") or {}
     hand = report.get("hand") or {}
     return {"name": report.get("name"), "file": report.get("file"), "status": report.get("status"),
-            "skipped": skipped, "error": report.get("error", ""), "frames": report.get("frames"),
+            "skipped": skipped, "error": report.get("error", ""), "warning": report.get("warning", ""),
+            "frames": report.get("frames"),
             "confident_share": round(summary["confident_share"], 4) if "confident_share" in summary else None,
             "uncertain_segments": len(summary.get("uncertain_segments", [])) if summary else None,
             "marker_rms_mm": hand.get("marker_rms_mm"),
@@ -415,7 +421,7 @@ def _write_summary(out_dir: str, summary: dict) -> None:
         json.dump(summary, f, indent=1)
     buf = io.StringIO()
     cols = ["name", "status", "skipped", "frames", "confident_share", "uncertain_segments", "marker_rms_mm",
-            "seconds", "error", "file"]
+            "seconds", "error", "warning", "file"]
     writer = csv.DictWriter(buf, cols, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(summary["takes_detail"])
@@ -428,7 +434,8 @@ def format_table(summary: dict) -> str:
     """The summary as a plain-text table for the terminal."""
     rows = summary["takes_detail"]
     head = ("take", "status", "frames", "confident", "uncertain", "hand RMS mm", "s")
-    body = [(r["name"], ("skipped" if r["skipped"] else r["status"]) + ("" if not r["error"] else " *"),
+    body = [(r["name"], ("skipped" if r["skipped"] else r["status"]) + (" *" if r["error"] else " !" if r.get("warning")
+                                                                         else ""),
              str(r["frames"] or ""), "" if r["confident_share"] is None else f"{100 * r['confident_share']:.1f} %",
              "" if r["uncertain_segments"] is None else str(r["uncertain_segments"]),
              "" if r["marker_rms_mm"] is None else f"{r['marker_rms_mm']:.2f}", f"{r['seconds']:.1f}")
@@ -439,6 +446,8 @@ def format_table(summary: dict) -> str:
     for r in rows:
         if r["error"]:
             lines.append(f"* {r['name']}: {r['error']}")
+        elif r.get("warning"):
+            lines.append(f"! {r['name']}: {r['warning']}")
     lines.append(f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped; "
                  f"{summary['frames_processed']:,} frames in {summary['seconds']:.1f} s with {summary['jobs']} job(s)")
     return "\n".join(lines)

@@ -256,7 +256,7 @@ def _label(args) -> int:
     from .core.atomic import atomic_output
     from .core.labeling import labeled_take, layout_markers
     from .core.layout import load_layout
-    from .core.pipeline import label_take
+    from .core.pipeline import label_take, layout_doubt
     from .core.synth.generate import load_truth, truth_path
     from .core.take import read_take
 
@@ -294,6 +294,9 @@ def _label(args) -> int:
                               validate=args.validate, hand=hand,
                               fit=labeled if args.method == "gmm" else None,
                               start=labeled[0] if (labeled is not None and args.method == "nearest") else None)
+        doubt = layout_doubt(take, layout, labeling)
+        if doubt:
+            labeling.info["layout_doubt"] = str(doubt)  # the review scene's panel shows it too
         if args.output:
             from .core.formats.c3d import write_c3d
 
@@ -316,6 +319,8 @@ def _label(args) -> int:
           f"{summary['null_segments']} null; {100 * summary['confident_share']:.1f} % of labeled samples confident, "
           f"{len(summary['uncertain_segments'])} uncertain segments")
     report = {"file": args.file, "info": labeling.info, "summary": summary}
+    if doubt:
+        print(f"  warning  {doubt} (--layout {doubt.better})")
     tpath = truth_path(args.file)
     if os.path.isfile(tpath):
         from .core.metrics import score_labeling

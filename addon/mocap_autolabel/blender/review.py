@@ -318,12 +318,13 @@ def object_for(take_coll: bpy.types.Collection, labeling: Labeling, segment: int
 
 
 def summary(labeling: Labeling, sure: float) -> dict:
-    """The panel's figures: labels present, share of labeled samples that are confident, uncertain segments."""
+    """The panel's figures: labels present, share of labeled samples that are confident, uncertain segments,
+    and the warning when another layout fits the take clearly better (or None)."""
     s = labeling.summary(sure)
     present = np.unique(labeling.label[labeling.label >= 0])
     return {"labels": f"{len(present)} / {len(labeling.names)}", "confident": s["confident_share"] * 100,
             "uncertain": len(uncertain_segments(labeling, sure)),
-            "locked": int(labeling.locked.sum())}
+            "locked": int(labeling.locked.sum()), "layout_doubt": labeling.info.get("layout_doubt")}
 
 
 def legend() -> list[tuple[str, str]]:
@@ -407,12 +408,22 @@ class LabelRequest:
     labeler: object
     token: str = ""  # the stored state's token when the request was made
 
-    def run(self, say=None) -> Labeling:
-        from ..core.pipeline import label_take
+    def run(self, say=None, check_layout: bool = False) -> Labeling:
+        """The labeling; with ``check_layout``, ``info["layout_doubt"]`` says when another layout fits
+        the take clearly better (a re-solve keeps what the labeling it replaces said)."""
+        from ..core.pipeline import label_take, layout_doubt
 
-        return label_take(self.take, self.layout, method=self.method, temporal=self.temporal,
-                          constraints=self.review.constraints, splits=self.review.splits,
-                          labeler=self.labeler, progress=say)
+        labeling = label_take(self.take, self.layout, method=self.method, temporal=self.temporal,
+                              constraints=self.review.constraints, splits=self.review.splits,
+                              labeler=self.labeler, progress=say)
+        if check_layout:
+            doubt = layout_doubt(self.take, self.layout, labeling)
+            doubt = str(doubt) if doubt else None
+        else:
+            doubt = self.previous.info.get("layout_doubt") if self.previous is not None else None
+        if doubt:
+            labeling.info["layout_doubt"] = doubt
+        return labeling
 
 
 def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None, method: str | None = None,

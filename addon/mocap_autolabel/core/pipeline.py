@@ -8,6 +8,7 @@ Take -> tracklets -> per-frame scores (any labeler) -> user constraints -> tempo
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -325,6 +326,64 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
     labeling.confidence[labeling.locked] = 1.0
     info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
     return labeling
+
+
+#: Below this share of confident labeled samples, the other layouts are tried. Wrong layouts give
+#: 0-12 % on our takes, but short right ones can too (8 of the 316 han2018 raw takes, 20-49 %),
+#: so a low share alone says nothing: another layout must do clearly better.
+DOUBTFUL_SHARE = 0.5
+#: How much more of the samples another layout must label confidently to be suggested.
+CLEARLY_BETTER = 0.3
+#: Frames of the take the other layouts are tried on (about half a second each).
+CHECK_FRAMES = 2000
+
+
+@dataclass(frozen=True)
+class LayoutDoubt:
+    """Another layout fits the take clearly better: ``better`` labels ``better_share`` of its labeled
+    samples confidently where ``layout`` labels ``share``. ``str()`` is the one-line warning."""
+
+    layout: str
+    share: float
+    better: str
+    better_share: float
+
+    def __str__(self) -> str:
+        return (f"only {100 * self.share:.1f} % of labeled samples are confident with layout {self.layout!r}, "
+                f"and {100 * self.better_share:.1f} % with {self.better!r}: is this a {self.better} take?")
+
+
+def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: float = 0.95) -> LayoutDoubt | None:
+    """A :class:`LayoutDoubt` when another built-in layout fits ``take`` clearly better, else None.
+
+    Nothing is tried while at least :data:`DOUBTFUL_SHARE` of the labeled samples are confident.
+    Below it, every built-in layout with a shipped ``set`` model labels the take's first
+    :data:`CHECK_FRAMES` frames; one whose confident share is at least :data:`DOUBTFUL_SHARE` and
+    :data:`CLEARLY_BETTER` above ``layout``'s (on the same frames) is named.
+    """
+    share = labeling.summary(confident)["confident_share"]
+    if share >= DOUBTFUL_SHARE:
+        return None
+    from .labelers.onnx_labeler import shipped_model
+    from .layout import builtin_layouts, load_layout
+
+    excerpt = replace(take, positions=take.positions[:CHECK_FRAMES],
+                      residuals=None if take.residuals is None else take.residuals[:CHECK_FRAMES])
+    shares = {}
+    for name in builtin_layouts():
+        if name != layout.name and os.path.isfile(shipped_model("set", name)):
+            try:
+                shares[name] = label_take(excerpt, load_layout(name)).summary(confident)["confident_share"]
+            except MocapInputError:  # e.g. no samples in the excerpt
+                continue
+    best = max(shares, key=shares.get, default=None)
+    if best is None or shares[best] < DOUBTFUL_SHARE:
+        return None
+    labeled = labeling.per_sample()[:CHECK_FRAMES] >= 0
+    own = (labeled & (labeling.per_sample_confidence()[:CHECK_FRAMES] >= confident)).sum() / max(labeled.sum(), 1)
+    if shares[best] - own < CLEARLY_BETTER:
+        return None
+    return LayoutDoubt(layout.name, float(share), best, float(shares[best]))
 
 
 @dataclass

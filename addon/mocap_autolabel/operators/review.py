@@ -163,13 +163,15 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         s = summary(labeling, context.scene.mocap_autolabel.sure)
         self.report({"INFO"}, f"Labeled {request.take_name}: {s['labels']} labels, {s['confident']:.1f} % of "
                               f"labeled samples confident, {s['uncertain']} uncertain segments")
+        if s["layout_doubt"]:
+            self.report({"WARNING"}, f"{request.take_name}: {s['layout_doubt']}")
         return {"FINISHED"}
 
     def execute(self, context):
         coll_name = context_take(context).name
         try:
             request = self._request(context)
-            labeling = request.run(_printer() if bpy.app.background else None)
+            labeling = request.run(_printer() if bpy.app.background else None, check_layout=True)
         except Exception as exc:
             return self._fail(exc, coll_name)
         return self._finish(context, request, labeling)
@@ -182,7 +184,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
             self._pending = self._request(context)
         except Exception as exc:
             return self._fail(exc, coll_name)
-        self._job = Job(self._pending.run).start()
+        self._job = Job(lambda say: self._pending.run(say, check_layout=True)).start()
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.1, window=context.window)
         wm.modal_handler_add(self)

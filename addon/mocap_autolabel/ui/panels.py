@@ -61,6 +61,12 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         box.label(text=f"Labels present: {s['labels']}")
         box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
         box.label(text=f"Uncertain segments: {s['uncertain']}   Locked: {s['locked']}")
+        if s["layout_doubt"]:
+            doubt = layout.box().column(align=True)  # one sentence, too long for one line of the sidebar
+            first, _, question = s["layout_doubt"].rpartition(": ")
+            doubt.label(text=question, icon="ERROR")
+            for part in first.split(", and "):
+                doubt.label(text=part)
         row = layout.row(align=True)
         row.operator("mocap_autolabel.next_uncertain", text="Previous", icon="TRIA_LEFT").previous = True
         row.operator("mocap_autolabel.next_uncertain", text="Next", icon="TRIA_RIGHT").previous = False
