@@ -432,6 +432,16 @@ def test_cli_label_writes_a_review_scene_the_panel_adopts(empty_scene, bpy_modul
     assert_scene_shows(coll, lab)
     assert any(o.type == "ARMATURE" for o in bpy.data.collections["Hand"].all_objects)
     assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
+    # Solving again replaces the CLI's hand, objects, data and actions, instead of adding one.
+    _select(bpy, next(iter(labeled_objects(coll).values())))
+    counts = []
+    for _ in range(2):
+        assert bpy.ops.mocap_autolabel.solve_hand() == {"FINISHED"}
+        arms = [o for o in bpy.data.objects if o.type == "ARMATURE"]
+        assert len(arms) == 1 and len(bpy.data.armatures) == 1 and arms[0].name == "Hand"
+        assert [c.name for c in arms[0].users_collection] == [f"{coll.name} hand"]
+        counts.append((len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.actions)))
+    assert "Hand" not in bpy.data.collections and counts[0] == counts[1]
 
 
 def test_cli_label_blend_needs_a_blend_path(tmp_path, take_file):

@@ -159,6 +159,22 @@ def key_poses(arm_obj: bpy.types.Object, hand: HandModel, poses: np.ndarray, fir
                 animio.write_keys(fc, frames, bases[:, b, i, 3])
 
 
+def solved_hand_collection(scene: bpy.types.Scene, source: str, name: str) -> bpy.types.Collection:
+    """A new collection ``name`` in ``scene`` for the hand solved from ``source`` (a take's collection
+    name, or a file). An earlier solve of the same source goes first, with its objects, their data
+    and actions: solving again replaces the hand instead of adding a second one."""
+    for old in [c for c in bpy.data.collections if c.get("mocap_solved_from") == source]:
+        objs = list(old.all_objects)
+        owned = {o.data for o in objs if o.data is not None}
+        owned |= {o.animation_data.action for o in objs if o.animation_data and o.animation_data.action}
+        bpy.data.batch_remove(objs + [old])
+        bpy.data.batch_remove([d for d in owned if d.users == 0])  # shared data stays
+    collection = bpy.data.collections.new(name)
+    collection["mocap_solved_from"] = source
+    scene.collection.children.link(collection)
+    return collection
+
+
 def build_solved_hand(solved, collection: bpy.types.Collection | None = None, name: str = "Hand") -> bpy.types.Object:
     """The calibrated rig of a :class:`~mocap_autolabel.core.pipeline.HandSolve`, keyed on every solved
     frame, its markers placed by the calibration; the calibration is kept on the armature."""

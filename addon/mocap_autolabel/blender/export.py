@@ -58,15 +58,13 @@ def write_solved_scene(take, solved, blend: str | None = None, fbx: str | None =
 
     Returns ``{"blend" | "fbx" | "bvh": path}`` of what was written.
     """
-    from .armature import build_solved_hand
+    from .armature import build_solved_hand, solved_hand_collection
     from .scene import ImportOptions, build_take
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
-    build_take(take, scene, ImportOptions())
-    collection = bpy.data.collections.new("Hand")
-    scene.collection.children.link(collection)
-    arm = build_solved_hand(solved, collection)
+    coll = build_take(take, scene, ImportOptions())
+    arm = build_solved_hand(solved, solved_hand_collection(scene, coll.name, "Hand"))
     first, last = solved.first_frame, solved.first_frame + take.n_frames - 1
     out = {}
     if blend:
@@ -87,7 +85,7 @@ def write_review_scene(take, layout_ref: str, labeling, blend: str, method: str 
     the review state (so the add-on's panel picks it up), and the solved hand if given; saved to ``blend``."""
     from ..core.layout import load_layout
     from ..core.review import Review
-    from .armature import build_solved_hand
+    from .armature import build_solved_hand, solved_hand_collection
     from .review import ReviewState, commit, write_labeling
     from .scene import ImportOptions, build_take
 
@@ -97,8 +95,6 @@ def write_review_scene(take, layout_ref: str, labeling, blend: str, method: str 
     write_labeling(coll, take, load_layout(layout_ref), labeling)
     commit(scene, coll, ReviewState(labeling, Review(), layout_ref, method, temporal))
     if solved is not None:
-        hand = bpy.data.collections.new("Hand")
-        scene.collection.children.link(hand)
-        build_solved_hand(solved, hand)
+        build_solved_hand(solved, solved_hand_collection(scene, coll.name, "Hand"))
     save_blend(blend)
     return blend

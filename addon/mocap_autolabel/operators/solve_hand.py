@@ -62,7 +62,7 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         return context.window_manager.invoke_props_dialog(self)
 
     def execute(self, context):
-        from ..blender.armature import build_solved_hand
+        from ..blender.armature import build_solved_hand, solved_hand_collection
         from ..core.errors import MocapInputError
         from ..core.hand.calibrate import Calibration
         from ..core.pipeline import solve_take
@@ -85,8 +85,8 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         except Exception as exc:  # never let a bad file take Blender down
             self.report({"ERROR"}, f"{source}: unexpected error while solving ({type(exc).__name__}: {exc})")
             return {"CANCELLED"}
-        collection = bpy.data.collections.new(f"{os.path.splitext(os.path.basename(source))[0]} hand")
-        context.scene.collection.children.link(collection)
+        collection = solved_hand_collection(context.scene, source,
+                                            f"{os.path.splitext(os.path.basename(source))[0]} hand")
         arm = build_solved_hand(solved, collection)
         report = solved.report()
         self.report({"INFO"}, f"Solved {report['solved_frames']} of {report['frames']} frames: marker RMS "
