@@ -357,7 +357,7 @@ def test_labeling_with_the_wrong_layout_says_which_fits(labeled):
     settings.layout = "glove13"
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     doubt = summary(state(coll).labeling, settings.sure)["layout_doubt"]
-    assert "with layout 'glove13'" in doubt and doubt.endswith("is this a han19 take?")
+    assert (doubt.layout, doubt.better) == ("glove13", "han19") and doubt.share < doubt.better_share
     assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
     assert summary(state(coll).labeling, settings.sure)["layout_doubt"] == doubt
     settings.layout = "han19"

@@ -107,7 +107,8 @@ def test_label_with_the_wrong_layout_warns_and_names_the_right_one(capsys, tmp_p
     text = capsys.readouterr().out
     assert "warning  only 0.0 % of labeled samples are confident with layout 'glove13'" in text
     assert "is this a han19 take? (--layout han19)" in text
-    assert "is this a han19 take?" in json.loads(report.read_text())["info"]["layout_doubt"]
+    doubt = json.loads(report.read_text())["info"]["layout_doubt"]
+    assert doubt["layout"] == "glove13" and doubt["better"] == "han19" and doubt["share"] < doubt["better_share"]
     assert main(["label", str(demo), "--report", str(report)]) == 0
     assert "warning" not in capsys.readouterr().out
     assert "layout_doubt" not in json.loads(report.read_text())["info"]

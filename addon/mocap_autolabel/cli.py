@@ -11,6 +11,7 @@ import argparse
 import json
 import os
 import sys
+from dataclasses import asdict
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
@@ -296,7 +297,7 @@ def _label(args) -> int:
                               start=labeled[0] if (labeled is not None and args.method == "nearest") else None)
         doubt = layout_doubt(take, layout, labeling)
         if doubt:
-            labeling.info["layout_doubt"] = str(doubt)  # the review scene's panel shows it too
+            labeling.info["layout_doubt"] = asdict(doubt)  # in the report, and in the review scene's panel
         if args.output:
             from .core.formats.c3d import write_c3d
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import uuid
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import bpy
 import numpy as np
@@ -320,11 +320,14 @@ def object_for(take_coll: bpy.types.Collection, labeling: Labeling, segment: int
 def summary(labeling: Labeling, sure: float) -> dict:
     """The panel's figures: labels present, share of labeled samples that are confident, uncertain segments,
     and the warning when another layout fits the take clearly better (or None)."""
+    from ..core.pipeline import LayoutDoubt
+
     s = labeling.summary(sure)
+    doubt = labeling.info.get("layout_doubt")
     present = np.unique(labeling.label[labeling.label >= 0])
     return {"labels": f"{len(present)} / {len(labeling.names)}", "confident": s["confident_share"] * 100,
             "uncertain": len(uncertain_segments(labeling, sure)),
-            "locked": int(labeling.locked.sum()), "layout_doubt": labeling.info.get("layout_doubt")}
+            "locked": int(labeling.locked.sum()), "layout_doubt": doubt and LayoutDoubt(**doubt)}
 
 
 def legend() -> list[tuple[str, str]]:
@@ -409,8 +412,9 @@ class LabelRequest:
     token: str = ""  # the stored state's token when the request was made
 
     def run(self, say=None, check_layout: bool = False) -> Labeling:
-        """The labeling; with ``check_layout``, ``info["layout_doubt"]`` says when another layout fits
-        the take clearly better (a re-solve keeps what the labeling it replaces said)."""
+        """The labeling; with ``check_layout``, ``info["layout_doubt"]`` (a :class:`LayoutDoubt` as a
+        dict) says when another layout fits the take clearly better (a re-solve keeps what the
+        labeling it replaces said)."""
         from ..core.pipeline import label_take, layout_doubt
 
         labeling = label_take(self.take, self.layout, method=self.method, temporal=self.temporal,
@@ -418,7 +422,7 @@ class LabelRequest:
                               labeler=self.labeler, progress=say)
         if check_layout:
             doubt = layout_doubt(self.take, self.layout, labeling)
-            doubt = str(doubt) if doubt else None
+            doubt = asdict(doubt) if doubt else None
         else:
             doubt = self.previous.info.get("layout_doubt") if self.previous is not None else None
         if doubt:

@@ -62,11 +62,11 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
         box.label(text=f"Uncertain segments: {s['uncertain']}   Locked: {s['locked']}")
         if s["layout_doubt"]:
-            doubt = layout.box().column(align=True)  # one sentence, too long for one line of the sidebar
-            first, _, question = s["layout_doubt"].rpartition(": ")
-            doubt.label(text=question, icon="ERROR")
-            for part in first.split(", and "):
-                doubt.label(text=part)
+            d = s["layout_doubt"]
+            col = layout.box().column(align=True)
+            col.label(text=f"Is this a {d.better} take?", icon="ERROR")
+            col.label(text=f"{d.better}: {100 * d.better_share:.0f} % confident")
+            col.label(text=f"{d.layout}: {100 * d.share:.0f} % confident")
         row = layout.row(align=True)
         row.operator("mocap_autolabel.next_uncertain", text="Previous", icon="TRIA_LEFT").previous = True
         row.operator("mocap_autolabel.next_uncertain", text="Next", icon="TRIA_RIGHT").previous = False
