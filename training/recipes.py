@@ -44,7 +44,9 @@ def recipe(method: str, layout: str) -> Recipe:
             # neighbours' flexion coupled in the uniform poses 87.85, although both bring adjacent-finger
             # distances nearer han2018's (synthetic fingers sit further apart and vary 2-3x more).
             # Width 96 / FFN 192: 90.01 at 4,000 steps, 91.00 at 8,000 (23.4 min, clean frames
-            # 99.41), but 7,770 frames/s against the shipped 13,000: below the speed bar.
+            # 99.41), but 7,770 frames/s against the shipped 13,000: below the speed bar. Stop 32: an
+            # auxiliary loss (each label-point pair regresses their true distance, training only)
+            # 88.87 at 4,000 steps, but 90.11 at 12,000 (25.5 min): the early gain does not last.
             frames = asdict(FrameConfig(**hands, placement_sd=0.003, tip_convergence=0.018))
             return Recipe(method="set", steps=12000, lr=6e-3, frames=frames, model={"layers": 4, "queries": 1})
         return Recipe(method="set", steps=6000, lr=6e-3, frames=asdict(FrameConfig(**hands)))
