@@ -206,6 +206,22 @@ def test_a_low_confidence_alone_raises_no_layout_doubt():
     assert layout_doubt(take, layout, labeling) is None
 
 
+def test_a_take_crowded_past_the_labelers_cap_labels():
+    """Far points beyond the cap are not scored, but their trajectories (here with a gap) are still
+    checked for continuity; that indexed past the scored slots (two real C3D files crashed so)."""
+    layout = load_layout("han19")
+    s = synthesize(layout, 300, seed=2)
+    rng = np.random.default_rng(0)
+    far = np.repeat(rng.normal(size=(1, 50, 3)) * 0.5 + [3.0, 0.0, 0.0], 300, axis=0).astype(np.float32)
+    far[100:110] = np.nan
+    take = Take(positions=np.concatenate([s.take.positions, far], axis=1),
+                names=s.take.names + [f"far{i}" for i in range(50)], rate=s.take.rate)
+    labeling = label_take(take, layout)
+    per = labeling.per_sample()
+    assert (per[:, s.take.n_points:][take.valid[:, s.take.n_points:]] == NULL).all()  # never scored: null
+    assert (per[:, :s.take.n_points] == label_take(s.take, layout).per_sample()).all()  # the hand as without them
+
+
 def test_exclusivity_is_an_assignment_not_greedy():
     # Both overlapping segments prefer label 0. Greedy (strongest first) gives segment 1 label 0
     # and segment 0 label 1: 10.5 + 2. The assignment gives 10 + 9.8.

@@ -66,7 +66,9 @@ def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, 
     index = np.arange(frames)[:, None]
     last = np.maximum.accumulate(np.where(held, index, -1), axis=0)  # (F, M): last frame <= f held
     first = np.minimum.accumulate(np.where(held, index, frames)[::-1], axis=0)[::-1]
-    own = np.full((frames, int(slot.max()) + 1, 3), np.nan)
+    # Tracklets cover every slot of the take, samples only the points that were scored (a frame
+    # crowded past the labeler's cap keeps the points nearest the hand): size by both.
+    own = np.full((frames, int(max(slot.max(), tracklets.slot.max())) + 1, 3), np.nan)
     own[frame, slot] = positions
     seg = segment_of(tracklets, frame, slot)
     s = np.flatnonzero(seg >= 0)  # the samples on a checked trajectory
@@ -98,6 +100,7 @@ def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, 
             r = np.linalg.norm(here - (was + shift), axis=1)
             tol = TOLERANCE + SPEED * gap[ti, li] / rate
             fine = (count > 0) | (gap[ti, li] <= 2)  # no neighbours: only a short gap is judged
+            fine &= np.isfinite(here[:, 0])  # an end that was not scored is not judged
             evidence[ti[fine], li[fine]] = np.where(r[fine] <= tol[fine], inside, -outside)
         edge = tracklets.start[seg[s]] if end == "start" else tracklets.stop[seg[s]] - 1
         near_end = np.abs(frame[s] - edge) < window
