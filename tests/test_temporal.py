@@ -92,6 +92,26 @@ def test_exclusive_assignment_is_optimal(seed):
                 assert labels[a] != labels[b]
 
 
+def test_exclusive_assignment_out_of_time_keeps_the_locks_and_exclusivity():
+    """Stopped before HiGHS found any labeling, the vote falls back to all null but the locks."""
+    rng = np.random.default_rng(1)
+    n, m = 60, 3
+    start = rng.integers(0, 50, n)
+    segs = _segments(start, start + rng.integers(1, 15, n))
+    weights = rng.normal(size=(n, m + 1)) * 5
+    weights[:, :m] += 4.0
+    locked = {0: 1, 5: NULL}
+    hurried = exclusive_assignment(weights, segs, locked, candidates=m, time_limit=0.0)
+    solved = exclusive_assignment(weights, segs, locked, candidates=m)
+    for labels in (hurried, solved):
+        assert labels[0] == 1 and labels[5] == NULL
+        for a in range(n):
+            for b in range(a + 1, n):
+                if segs.start[a] < segs.stop[b] and segs.start[b] < segs.stop[a] and labels[a] >= 0:
+                    assert labels[a] != labels[b]
+    assert (hurried >= 0).sum() < (solved >= 0).sum()  # the clashing segments fell back to null
+
+
 @pytest.mark.parametrize("seed", range(12))
 def test_exclusive_assignment_with_paid_switches_is_optimal(seed):
     """Pieces of one trajectory pay to change label between them; the assignment stays optimal
