@@ -11,7 +11,7 @@ from mocap_autolabel.core.errors import MocapInputError
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint, labeled_take, segments_from_runs
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import segments_right
-from mocap_autolabel.core.pipeline import DOUBTFUL_SHARE, label_take, layout_doubt
+from mocap_autolabel.core.pipeline import DOUBTFUL_SHARE, label_take, layout_doubt, time_limit_warning
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
 from mocap_autolabel.core.temporal.confidence import (
@@ -101,8 +101,14 @@ def test_exclusive_assignment_out_of_time_keeps_the_locks_and_exclusivity():
     weights = rng.normal(size=(n, m + 1)) * 5
     weights[:, :m] += 4.0
     locked = {0: 1, 5: NULL}
-    hurried = exclusive_assignment(weights, segs, locked, candidates=m, time_limit=0.0)
-    solved = exclusive_assignment(weights, segs, locked, candidates=m)
+    facts, facts_solved = {}, {}
+    hurried = exclusive_assignment(weights, segs, locked, candidates=m, time_limit=0.0, facts=facts)
+    solved = exclusive_assignment(weights, segs, locked, candidates=m, facts=facts_solved)
+    assert facts == {"time_limited": 1} and facts_solved == {"time_limited": 0}
+    labeling = label_take(synthesize(load_layout("glove13"), 240, seed=4).take, load_layout("glove13"))
+    assert labeling.info["time_limited"] == 0 and time_limit_warning(labeling) is None
+    labeling.info["time_limited"] = 2
+    assert "stopped at its 3 s limit 2 time(s)" in time_limit_warning(labeling)
     for labels in (hurried, solved):
         assert labels[0] == 1 and labels[5] == NULL
         for a in range(n):

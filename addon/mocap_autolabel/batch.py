@@ -210,7 +210,7 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     from .core.formats.c3d import write_c3d
     from .core.labeling import labeled_take
     from .core.layout import load_layout
-    from .core.pipeline import label_take, layout_doubt, solve_take
+    from .core.pipeline import label_take, layout_doubt, solve_take, time_limit_warning
     from .core.take import read_take
 
     t = time.perf_counter()
@@ -239,8 +239,9 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
            "hand_frames": round(hand_frames, 4), "summary": labeling.summary(settings.confident),
            "outputs": {}}
-    if doubt:
-        out["warning"] = str(doubt)
+    said = [str(w) for w in (doubt, time_limit_warning(labeling)) if w]
+    if said:
+        out["warning"] = "; ".join(said)
     t = time.perf_counter()
     target = os.path.join(out_dir, name + ".labeled.c3d")
     write_c3d(labeled, target)

@@ -257,7 +257,7 @@ def _label(args) -> int:
     from .core.atomic import atomic_output
     from .core.labeling import labeled_take, layout_markers
     from .core.layout import load_layout
-    from .core.pipeline import label_take, layout_doubt
+    from .core.pipeline import label_take, layout_doubt, time_limit_warning
     from .core.synth.generate import load_truth, truth_path
     from .core.take import read_take
 
@@ -322,6 +322,8 @@ def _label(args) -> int:
     report = {"file": args.file, "info": labeling.info, "summary": summary}
     if doubt:
         print(f"  warning  {doubt} (--layout {doubt.better})")
+    if time_limit_warning(labeling):
+        print(f"  warning  {time_limit_warning(labeling)}")
     tpath = truth_path(args.file)
     if os.path.isfile(tpath):
         from .core.metrics import score_labeling

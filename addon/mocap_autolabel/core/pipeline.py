@@ -300,7 +300,9 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
                 extra += continuity_logp(at, samples.frame, samples.slot, per, held_for, segments, len(layout),
                                          take.rate, *continuity)
             if extra.any():
+                stopped = facts["time_limited"]
                 decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
+                facts["time_limited"] += stopped
         info.update(facts)
         first_locked = locked_at[decided.start, decided.slot]
         labeling = Labeling(names=layout.names, n_frames=take.n_frames, n_points=take.n_points,
@@ -326,6 +328,17 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
     labeling.confidence[labeling.locked] = 1.0
     info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
     return labeling
+
+
+def time_limit_warning(labeling: Labeling) -> str | None:
+    """A one-line warning when the vote's assignment was stopped by its time limit, else None."""
+    from .temporal.voting import MILP_SECONDS
+
+    stopped = labeling.info.get("time_limited", 0)
+    if not stopped:
+        return None
+    return (f"the vote's exclusive assignment stopped at its {MILP_SECONDS:g} s limit {stopped} time(s): the "
+            f"labels are the best found by then (takes of hands need far less; is this a hand?)")
 
 
 #: Below this share of confident labeled samples, the other layouts are tried. Wrong layouts give

@@ -191,7 +191,7 @@ MILP_SECONDS = 3.0
 
 def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[int, int] | None = None,
                          candidates: int | None = None, time_limit: float = MILP_SECONDS,
-                         switch: np.ndarray | None = None) -> np.ndarray:
+                         switch: np.ndarray | None = None, facts: dict | None = None) -> np.ndarray:
     """The best label per segment (:data:`NULL` allowed) such that no two segments that overlap
     in time share a label. ``locked`` fixes some segments' labels.
 
@@ -207,6 +207,7 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
             ``s - 1``'s, where the two are pieces of one trajectory (see :func:`switch_costs`); 0
             where they are not. A piece may then take any label that some piece of its trajectory
             finds useful.
+        facts: if given, ``facts["time_limited"]`` counts the solves stopped by ``time_limit``.
 
     Returns:
         int64 ``(S,)`` labels.
@@ -248,8 +249,10 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     index[sub] = np.arange(len(sub))
     sub_locked = {int(index[s]): lab for s, lab in locked.items() if inside[s]}
     sub_segments = Segments(segments.slot[sub], segments.start[sub], segments.stop[sub])
-    out[sub] = _milp_assignment(weights[sub], sub_segments, index[var_seg[keep_var]], var_lab[keep_var],
-                                sub_locked, time_limit, switch[sub])
+    out[sub], stopped = _milp_assignment(weights[sub], sub_segments, index[var_seg[keep_var]], var_lab[keep_var],
+                                         sub_locked, time_limit, switch[sub])
+    if facts is not None:
+        facts["time_limited"] = facts.get("time_limited", 0) + int(stopped)
     return np.where(out == m, NULL, out)
 
 
@@ -276,10 +279,10 @@ def _best_chains(weights: np.ndarray, switch: np.ndarray) -> np.ndarray:
 
 
 def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarray, var_lab: np.ndarray,
-                     locked: dict[int, int], time_limit: float, switch: np.ndarray) -> np.ndarray:
+                     locked: dict[int, int], time_limit: float, switch: np.ndarray) -> tuple[np.ndarray, bool]:
     """The exclusive assignment as an integer programme over the candidate (segment, label) pairs
     (and one switch variable per paid link between pieces of a trajectory); returns labels with
-    null as ``M``."""
+    null as ``M``, and whether the time limit stopped the solver."""
     n, m1 = weights.shape
     m = m1 - 1
     n_pairs = len(var_seg)
@@ -343,10 +346,10 @@ def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarra
             raise ValueError(f"no exclusive labeling exists: {res.message}")
         for s, label in locked.items():  # all null but the locks: exclusive, as the locks are
             out[s] = m if label == NULL else label
-        return out
+        return out, True
     chosen = res.x[:n_pairs] > 0.5
     out[var_seg[chosen]] = var_lab[chosen]
-    return out
+    return out, res.status == 1
 
 
 def _interacting_groups(var_seg: np.ndarray, var_lab: np.ndarray, segments: Segments, m: int,
@@ -439,7 +442,7 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
 
     Returns:
         the final segments, their labels int64 ``(S,)``, the segment of each sample ``(n,)`` and
-        facts (swaps split, refinement rounds).
+        facts (swaps split, refinement rounds, assignments stopped by their time limit).
     """
     free = _joins(segments)
     crossing_at: set[tuple[int, int]] = set()
@@ -451,14 +454,14 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
     if swaps:
         segments = split_segments(segments, swaps)
         seg = segment_of(segments, samples.frame, samples.slot)
-    facts = {"swaps_split": int(sum(len(v) for v in swaps.values())), "refined": 0}
+    facts = {"swaps_split": int(sum(len(v) for v in swaps.values())), "refined": 0, "time_limited": 0}
     while True:
         weights, count = segment_weights(samples, seg, len(segments), score, p, q)
         weights[:, -1] += null_prior[0] * tracklet_share(segments) + null_prior[1] * count
         first_locked = locked_at[segments.start, segments.slot]
         locked = {int(i): int(first_locked[i]) for i in np.flatnonzero(first_locked >= NULL)}
         switch = switch_costs(segments, free, crossing_at, switch_cost)
-        labels = exclusive_assignment(weights, segments, locked, switch=switch)
+        labels = exclusive_assignment(weights, segments, locked, switch=switch, facts=facts)
         labels[(count == 0) & (first_locked < NULL)] = NULL  # never scored (beyond the cap): no evidence
         if facts["refined"] >= refine:
             break
