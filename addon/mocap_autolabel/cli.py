@@ -322,8 +322,9 @@ def _label(args) -> int:
     report = {"file": args.file, "info": labeling.info, "summary": summary}
     if doubt:
         print(f"  warning  {doubt} (--layout {doubt.better})")
-    if time_limit_warning(labeling):
-        print(f"  warning  {time_limit_warning(labeling)}")
+    hurried = time_limit_warning(labeling)
+    if hurried:
+        print(f"  warning  {hurried}")
     tpath = truth_path(args.file)
     if os.path.isfile(tpath):
         from .core.metrics import score_labeling
