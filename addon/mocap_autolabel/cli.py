@@ -81,6 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "downgrade segments the hand cannot explain (vote only; slower: it calibrates a hand)")
     lab.add_argument("--calibration", metavar="CALIB.json",
                      help="the performer's hand calibration for --validate (default: calibrated on this take)")
+    _hand_arguments(lab)
     lab.add_argument("--report", metavar="REPORT.json", help="write counts, confidence, uncertain segments, timings")
     lab.add_argument("--labels", metavar="OUT.npz", help="write labels and confidences per frame and point slot")
     lab.add_argument("--blend", metavar="OUT.blend",
@@ -139,6 +140,53 @@ def build_parser() -> argparse.ArgumentParser:
     trn.add_argument("--steps", type=int, help="training steps (default: the shipped recipe's)")
     trn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     return parser
+
+
+def _hand_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--hands", default="auto", choices=("auto", "1", "2"),
+                        help="hands of the layout in the take: found (auto, default) or forced")
+    parser.add_argument("--sides", metavar="SIDE,SIDE",
+                        help="override the detected sides, one per hand in the order of their mean x "
+                             "(e.g. left,right)")
+    parser.add_argument("--hand-names", metavar="CONVENTION",
+                        help="how labels carry their hand's side: prefix (L_ThumbTip, the default for two "
+                             "hands), suffix (ThumbTip_L), vicon (LeftHand:ThumbTip) or a pattern with {name} and "
+                             "{S}, {side} or {Side}; one hand keeps plain names unless given")
+
+
+def _hand_options(args) -> dict:
+    """label_take's hand keywords from --hands / --sides / --hand-names (ValueError on a bad value)."""
+    from .core.hands import SIDES, HandNaming
+
+    sides = None
+    if args.sides:
+        sides = [v.strip().lower() for v in args.sides.split(",")]
+        if any(v not in SIDES for v in sides):
+            raise ValueError(f"--sides takes left/right per hand, got {args.sides!r}")
+    return {"hands": args.hands, "sides": sides,
+            "naming": HandNaming(args.hand_names) if args.hand_names else None}
+
+
+def _hands_line(labeling, confident: float = 0.95) -> str | None:
+    """One line per take on the hands found and their sides, or None for a plain one-hand take."""
+    facts = labeling.info.get("hands", {})
+    count = facts.get("count", 1)
+    if count < 2 and "sides" not in facts:
+        return "one hand of two forced was found" if facts.get("forced") == 2 else None
+    parts = []
+    for h, side in enumerate(facts.get("sides", [])):
+        rms = facts.get("rms_mm", [None] * 2)[h]
+        fit = f", fits {side} {min(rms):.1f} mm vs {max(rms):.1f}" if rms else ""
+        m = len(labeling.names) // max(count, 1)
+        hand = labeling.label_range(h * m, (h + 1) * m).summary(confident) if count == 2 else labeling.summary(confident)
+        parts.append(f"{side} {hand['labeled_segments']} segments, {100 * hand['confident_share']:.1f} % "
+                     f"confident{fit}")
+    forced = " (two forced, one found)" if facts.get("forced") == 2 else ""
+    line = (f"{count} hand{'s' if count > 1 else ''}{forced}: " + "; ".join(parts)
+            + f" (sides {100 * facts.get('confidence', 0):.0f} % sure)")
+    if facts.get("warning"):
+        line += f"\n  warning  {facts['warning']}"
+    return line
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -292,10 +340,10 @@ def _label(args) -> int:
             hand.check(layout, args.calibration)
         labeling = label_take(take, layout, method=args.method, temporal=args.temporal, model=args.model,
                               score=args.vote, p=args.p, q=args.q, n_best=args.n_best,
-                              validate=args.validate, hand=hand,
+                              validate=args.validate, hand=hand, **_hand_options(args),
                               fit=labeled if args.method == "gmm" else None,
                               start=labeled[0] if (labeled is not None and args.method == "nearest") else None)
-        doubt = layout_doubt(take, layout, labeling)
+        doubt = layout_doubt(take, layout, labeling) if labeling.info["hands"]["count"] == 1 else None
         if doubt:
             labeling.info["layout_doubt"] = asdict(doubt)  # in the report, and in the review scene's panel
         if args.output:
@@ -303,6 +351,9 @@ def _label(args) -> int:
 
             write_c3d(labeled_take(take, labeling), args.output)
         solved = None
+        if args.blend and labeling.info["hands"]["count"] == 2:
+            raise ValueError("a review scene (--blend) holds one hand for now; the take holds two: label it "
+                             "with --hands 1, or write the labeled C3D (-o) and solve it (solve --blend)")
         if args.solve_hand:
             from .core.pipeline import solve_take
 
@@ -320,6 +371,9 @@ def _label(args) -> int:
           f"{summary['null_segments']} null; {100 * summary['confident_share']:.1f} % of labeled samples confident, "
           f"{len(summary['uncertain_segments'])} uncertain segments")
     report = {"file": args.file, "info": labeling.info, "summary": summary}
+    hands = _hands_line(labeling)
+    if hands:
+        print(f"  hands    {hands}")
     if doubt:
         print(f"  warning  {doubt} (--layout {doubt.better})")
     hurried = time_limit_warning(labeling)
@@ -330,7 +384,7 @@ def _label(args) -> int:
         from .core.metrics import score_labeling
 
         truth = load_truth(tpath)["labels"]
-        score = score_labeling(labeling.per_sample(), truth, take.valid, len(layout))
+        score = score_labeling(labeling.per_sample(), truth, take.valid, len(labeling.names))
         report["truth"] = score.as_dict()
         print(f"  truth    {tpath}: {100 * score.accuracy:.2f} % correct, {100 * score.frame_accuracy:.2f} % of frames "
               f"all correct ({score.erroneous} erroneous, {score.false_marker} false marker, "
@@ -347,7 +401,7 @@ def _label(args) -> int:
     if args.labels:
         with atomic_output(args.labels) as tmp, open(tmp, "wb") as fh:
             np.savez_compressed(fh, labels=labeling.per_sample(), confidence=labeling.per_sample_confidence(),
-                                names=np.array(layout.names))
+                                names=np.array(labeling.names))
         print(f"  labels   {args.labels}")
     return EXIT_OK
 

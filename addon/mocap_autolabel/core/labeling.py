@@ -94,6 +94,16 @@ class Labeling:
         """int32 ``(frames, points)``: the segment of every sample, -1 where none."""
         return self._paint(np.arange(len(self)), -1, np.int32)
 
+    def label_range(self, first: int, stop: int) -> Labeling:
+        """The segments labeled ``first`` to ``stop - 1`` (one hand of a two-hand labeling), relabeled
+        from 0, with those names; the rest of the take is left out."""
+        keep = (self.label >= first) & (self.label < stop)
+        evidence = None if self.evidence is None else self.evidence[keep]
+        return Labeling(names=self.names[first:stop], n_frames=self.n_frames, n_points=self.n_points,
+                        slot=self.slot[keep], start=self.start[keep], stop=self.stop[keep],
+                        label=(self.label[keep] - first).astype(np.int16), confidence=self.confidence[keep],
+                        locked=self.locked[keep], info=self.info, evidence=evidence)
+
     def summary(self, confident: float = 0.95) -> dict:
         """Counts for reports: segments, labeled samples, the share of labeled samples at or above
         ``confident``, and the uncertain labeled segments (worst first) with their frame ranges."""

@@ -18,6 +18,7 @@ import numpy as np
 from .errors import MocapInputError
 from .hand.calibrate import Calibration, calibrate
 from .hand.ik import GATE, MIN_MARKERS, Fit
+from .hands import HandNaming, Hands, decide_sides, find_hands, replace_valid, side_evidence
 from .labelers import METHODS, FrameBatch, Labeler, make_labeler, pack_frames
 from .labelers.assign import assign, row_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
@@ -32,7 +33,7 @@ from .temporal.confidence import (
     segment_evidence,
 )
 from .temporal.continuity import continuity_logp
-from .temporal.partners import partner_logp, rigid_pairs, take_distances
+from .temporal.partners import RigidPairs, partner_logp, rigid_pairs, take_distances
 from .temporal.voting import (
     LOG_FLOOR,
     Samples,
@@ -130,6 +131,134 @@ def _apply_constraints(scores: np.ndarray, slots: np.ndarray, mask: np.ndarray,
     return scores
 
 
+#: Per-frame labelers that label two hands (each hand's points scored on their own, then decided jointly).
+JOINT_METHODS = ("set", "perm", "cnn")
+#: Log-score of a label of the other hand (below the vote's floor: never chosen per frame).
+_OTHER_HAND = -30.0
+
+
+class _HandLabels:
+    """The labels a take is decided over: the layout's M for one hand, 2M for two (hand 0's first,
+    in the order of :func:`.hands.find_hands` until the sides are known)."""
+
+    def __init__(self, layout: Layout, hands: int):
+        self.layout, self.hands = layout, hands
+        m = len(layout)
+        self.names = list(layout.names) if hands == 1 else [f"{h}:{n}" for h in range(hands) for n in layout.names]
+        self.m = m
+
+    def __len__(self) -> int:
+        return self.m * self.hands
+
+    def rigid_pairs(self) -> RigidPairs:
+        """The layout's rigid pairs, once per hand (never across hands)."""
+        one = rigid_pairs(self.layout)
+        if self.hands == 1:
+            return one
+        return RigidPairs(np.concatenate([one.pairs + h * self.m for h in range(self.hands)]),
+                          np.tile(one.distance, self.hands), np.tile(one.tolerance, self.hands))
+
+    def to_internal(self, label: int, order: list[int]) -> int:
+        """A final label (sides' order: left hand first) as the internal one (hands' order)."""
+        if label < 0:
+            return label
+        final_hand, index = divmod(label, self.m)
+        return order.index(final_hand) * self.m + index
+
+
+def _hand_order(sides: Sequence[str]) -> list[int]:
+    """Final place of each hand (left first) from the hands' sides in their found order."""
+    return [0 if s == "left" else 1 for s in sides]
+
+
+def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = None) -> np.ndarray | None:
+    """bool ``(P,)``: slots the file already names that are no marker of ``layout`` (in any side's
+    naming): a labeled body or prop, kept out of the hands. None where there are none."""
+    from .hands import NAMINGS, SIDES
+
+    own = set(layout.names)
+    for conv in ([naming] if naming is not None else [HandNaming(k) for k in NAMINGS]):
+        for side in SIDES:
+            own.update(conv.names(side, layout))
+    out = np.array([not _unnamed(n) and n not in own for n in take.names], dtype=bool)
+    return out if out.any() else None
+
+
+def _unnamed(name: str) -> bool:
+    """A slot name a capture system gives to a point it did not label (``*12``, ``Unlabeled 3``, empty)."""
+    n = name.strip()
+    return (not n or n.startswith("*") or n.lower().startswith(("unlabeled", "unnamed", "marker"))
+            or n.isdigit())
+
+
+def _two_hand_scores(take: Take, layout: Layout, found: Hands, batch: FrameBatch, labeler: Labeler) -> np.ndarray:
+    """Joint per-frame scores ``(F, K, 2M + 1)`` of a two-hand take: each hand's points are scored by
+    ``labeler`` on their own; a sample offered to both hands gets both, each at half the weight;
+    a sample of no hand is null."""
+    m = len(layout)
+    frames, k = batch.mask.shape
+    joint = np.full((frames, k, 2 * m + 1), _OTHER_HAND, dtype=np.float32)
+    joint[..., 2 * m] = 0.0
+    column = np.full((frames, take.n_points), -1, dtype=np.int64)  # joint column of each (frame, slot)
+    f_idx, k_idx = np.nonzero(batch.mask)
+    column[f_idx, batch.slots[f_idx, k_idx]] = k_idx
+    null = np.full((frames, k), -np.inf)
+    cap = _cap(layout)
+    for h in range(2):
+        members = found.members(h)
+        part = _pack(replace_valid(take, members), cap)
+        scores = labeler.scores(part.points, part.mask)
+        pf, pk = np.nonzero(part.mask)
+        ps = part.slots[pf, pk]
+        jk = column[pf, ps]
+        ok = jk >= 0
+        pf, pk, ps, jk = pf[ok], pk[ok], ps[ok], jk[ok]
+        weight = np.where(found.both[pf, ps], np.log(0.5), 0.0).astype(np.float32)
+        joint[pf, jk, h * m:(h + 1) * m] = scores[pf, pk, :m] + weight[:, None]
+        null[pf, jk] = np.logaddexp(null[pf, jk], scores[pf, pk, m] + weight)
+    offered = np.isfinite(null)
+    joint[..., 2 * m] = np.where(offered, null, 0.0)
+    return joint
+
+
+def _name_hands(take: Take, layout: Layout, labeling: Labeling, found: Hands, sides: Sequence[str] | None,
+                naming: HandNaming | None) -> Labeling:
+    """Decide the sides of the hands, put the left hand's labels first and name them; facts in
+    ``info["hands"]``."""
+    from .hands import DEFAULT_NAMING, sided_layout_names
+
+    m = len(layout)
+    facts = {key: found.info[key] for key in ("present_share", "median_markers", "forced", "both_tracklets",
+                                              "cuts") if key in found.info}
+    facts["count"] = found.count
+    if found.count == 1 and naming is None and sides is None:
+        labeling.info["hands"] = facts
+        return labeling
+    per = labeling.per_sample()
+    evidence = []
+    for h in range(found.count):
+        observed = np.full((take.n_frames, m, 3), np.nan)
+        f, p = np.nonzero((per >= h * m) & (per < (h + 1) * m))
+        observed[f, per[f, p] - h * m] = take.positions[f, p]
+        evidence.append(side_evidence(observed, layout))
+    side_list, side_facts = decide_sides(evidence, None if sides is None else list(sides))
+    facts.update(side_facts)
+    facts["by_hand_order"] = list(side_list)
+    if found.count == 2:
+        naming = naming or HandNaming(DEFAULT_NAMING)
+        order = _hand_order(side_list)
+        if order != [0, 1]:
+            hand, index = np.divmod(labeling.label.astype(np.int64), m)
+            moved = np.where(labeling.label >= 0, np.array(order)[np.clip(hand, 0, 1)] * m + index, labeling.label)
+            labeling.label = moved.astype(np.int16)
+        side_list = ["left", "right"]
+    facts["naming"] = naming.template if naming is not None else None
+    labeling.names = sided_layout_names(layout, side_list, naming)
+    facts["sides"] = side_list if found.count == 2 else facts["sides"]
+    labeling.info["hands"] = facts
+    return labeling
+
+
 def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = "vote",
                constraints: Sequence[Constraint] = (), model: str | None = None, fit: np.ndarray | None = None,
                start: np.ndarray | None = None, score: str = "likelihood", p: float = 2.0, q: float = -0.5,
@@ -137,7 +266,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                validate: bool = False, hand: Calibration | None = None, splits: Sequence[tuple[int, int]] = (),
                null_prior: tuple[float, float] | None = None, switch_cost: tuple[float, float] | None = None,
                partner: tuple[float, float] | None = None, continuity: tuple[float, float] | None = None,
-               progress: Callable[[str], None] | None = None) -> Labeling:
+               progress: Callable[[str], None] | None = None, hands: str | int = "auto",
+               sides: Sequence[str] | None = None, naming: HandNaming | str | None = None,
+               keep_named: bool = True) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -177,9 +308,19 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             the first vote with the partners' evidence. Default: the one fitted for this method
             and layout, shipped beside the null prior.
         progress: called with a short message at each stage.
+        hands: ``"auto"`` finds how many hands of ``layout`` the take holds (:func:`.hands.find_hands`);
+            1 or 2 force it. Two hands are labeled jointly: ``2M`` labels, the left hand's first,
+            named with ``naming``'s side tokens; no trajectory takes labels of both hands at once.
+        sides: the side of each hand found, in the order of :func:`.hands.find_hands` (hands by the
+            mean x of their centre); default: decided by the IK fit (:func:`.hands.decide_sides`).
+        naming: a :class:`.hands.HandNaming` (or its pattern) for the labels' names; two hands
+            always get one (default ``L_``/``R_`` prefixes); one hand keeps plain names unless given.
+        keep_named: points the file already names that are not ``layout``'s markers (a labeled
+            body, a named prop) are kept out of the hands and stay null; False offers them too.
 
     Returns:
-        the :class:`Labeling`; ``info`` holds the settings and the time of each stage.
+        the :class:`Labeling`; ``info`` holds the settings and the time of each stage, and
+        ``info["hands"]`` the hands found (count, sides with their evidence).
     """
     if method not in METHODS:
         raise ValueError(f"unknown labeling method {method!r}; choose one of {', '.join(METHODS)}")
@@ -192,22 +333,49 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     for c in constraints:
         if not (0 <= c.slot < take.n_points and 0 <= c.start < c.stop <= take.n_frames):
             raise ValueError(f"constraint {c} lies outside the take ({take.n_frames} frames, {take.n_points} slots)")
-    check_constraints(constraints, len(layout))
     if validate and temporal != "vote":
         raise ValueError("validate needs temporal='vote'")
     say = progress or (lambda _msg: None)
     times: dict[str, float] = {}
     t0 = time.perf_counter()
 
+    naming = HandNaming(naming) if isinstance(naming, str) else naming
+    ignore = other_named_points(take, layout, naming) if keep_named else None
+    say("finding hands")
+    found = find_hands(take, layout, hands, ignore=ignore)
+    times["hands"] = time.perf_counter() - t0
+    if found.count == 2 and method not in JOINT_METHODS:
+        raise ValueError(f"two hands are labeled with {', '.join(JOINT_METHODS)}, not {method!r} "
+                         f"(or force one hand: hands=1)")
+    if found.count == 2 and validate:
+        raise ValueError("IK validation works on one hand; the take holds two (force one hand: hands=1)")
+    hand_labels = _HandLabels(layout, found.count)
+    check_constraints(constraints, len(hand_labels))
+    if found.count == 2 and constraints and sides is None:
+        # Corrections name final labels (left hand first): the sides must be known before the vote.
+        sides = label_take(take, layout, method, temporal, model=model, hands=2, keep_named=keep_named,
+                           naming=naming).info["hands"]["by_hand_order"]
+    order = _hand_order(sides) if found.count == 2 and sides is not None else None
+    if order is not None:
+        constraints = [replace(c, label=hand_labels.to_internal(c.label, order)) for c in constraints]
+    t = time.perf_counter()
     say("packing frames")
-    batch = _pack(take, _cap(layout))
+    if ignore is not None and ignore.any():
+        take_in = replace_valid(take, valid & ~ignore[None, :])
+    else:
+        take_in = take
+    batch = _pack(take_in, _cap(layout) * found.count)
     points, mask, slots = batch.points, batch.mask, batch.slots
-    times["pack"] = time.perf_counter() - t0
+    times["pack"] = time.perf_counter() - t
 
     say(f"scoring {take.n_frames} frames with {method}")
     t = time.perf_counter()
-    labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
-    scores = labeler.scores(points, mask)
+    if found.count == 2:
+        labeler = labeler or make_labeler(method, layout, model)
+        scores = _two_hand_scores(take_in, layout, found, batch, labeler)
+    else:
+        labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
+        scores = labeler.scores(points, mask)
     scores = _apply_constraints(scores, slots, mask, constraints)
     times["scores"] = time.perf_counter() - t
 
@@ -215,7 +383,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     cuts: dict[int, list[int]] = {}
     for c in constraints:
         cuts.setdefault(c.slot, []).extend([c.start, c.stop])
-    for slot, frame in splits:
+    for slot, frame in list(splits) + found.cuts:
         cuts.setdefault(int(slot), []).append(int(frame))
     crossings = _crossings(take) if split_swaps and temporal == "vote" else {}
     segments = split_segments(Segments(tracklets.slot.astype(np.int64), tracklets.start, tracklets.stop), cuts)
@@ -239,7 +407,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     info["continuity"] = [float(v) for v in continuity]
 
     def decide(scores: np.ndarray) -> Labeling:
-        return _decide(scores, batch, take, layout, method, temporal, segments, locked_at, info, score, p, q,
+        return _decide(scores, batch, take, hand_labels, method, temporal, segments, locked_at, info, score, p, q,
                        split_swaps, n_best, calibrate, null_prior, crossings, switch_cost, partner,
                        continuity)
 
@@ -259,12 +427,15 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                               "marker_rms_mm": round(hand_fit.overall_rms() * 1000, 3),
                               "downgraded_segments": downgrade(labeling, residuals)}
         times["validate"] = time.perf_counter() - t
+    t = time.perf_counter()
+    labeling = _name_hands(take, layout, labeling, found, sides, naming)
+    times["sides"] = time.perf_counter() - t
     times["total"] = time.perf_counter() - t0
     info["seconds"] = {key: round(v, 4) for key, v in times.items()}
     return labeling
 
 
-def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, method: str, temporal: str,
+def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabels, method: str, temporal: str,
             segments: Segments, locked_at: np.ndarray, info: dict, score: str, p: float, q: float,
             split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float],
             crossings: dict[int, list[int]], switch_cost: tuple[float, float],
@@ -272,6 +443,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
     """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
+    layout, n_labels = labels.layout, len(labels)
     f_idx, k_idx = np.nonzero(mask)
     probabilities = row_probabilities(scores[f_idx, k_idx].astype(np.float64))  # == scores[mask], in its order
     logp = np.log(np.maximum(probabilities, np.exp(LOG_FLOOR))).astype(np.float32)
@@ -284,7 +456,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
                         crossings=crossings, switch_cost=switch_cost)
 
         decided, label, seg, facts = run_vote(samples)
-        rigid = rigid_pairs(layout) if partner and any(partner) else None
+        rigid = labels.rigid_pairs() if partner and any(partner) else None
         with_rigid, with_continuity = rigid is not None and len(rigid) > 0, any(continuity)
         if with_rigid or with_continuity:
             # Vote again with the evidence of rigid partners and of continuity, read off the first
@@ -293,11 +465,11 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
             per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
             at = points[f_idx, k_idx].astype(np.float64)
             if with_rigid:
-                rigid = take_distances(rigid, at, samples.frame, per, len(layout))
-                extra += partner_logp(at, samples.frame, per, len(layout), rigid, *partner)
+                rigid = take_distances(rigid, at, samples.frame, per, n_labels)
+                extra += partner_logp(at, samples.frame, per, n_labels, rigid, *partner)
             if with_continuity:
                 held_for = np.where(seg >= 0, (decided.stop - decided.start)[np.maximum(seg, 0)], 0)
-                extra += continuity_logp(at, samples.frame, samples.slot, per, held_for, segments, len(layout),
+                extra += continuity_logp(at, samples.frame, samples.slot, per, held_for, segments, n_labels,
                                          take.rate, *continuity)
             if extra.any():
                 stopped = facts["time_limited"]
@@ -305,7 +477,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
                 facts["time_limited"] += stopped
         info.update(facts)
         first_locked = locked_at[decided.start, decided.slot]
-        labeling = Labeling(names=layout.names, n_frames=take.n_frames, n_points=take.n_points,
+        labeling = Labeling(names=labels.names, n_frames=take.n_frames, n_points=take.n_points,
                             slot=decided.slot, start=decided.start, stop=decided.stop,
                             label=label.astype(np.int16), confidence=np.zeros(len(decided), dtype=np.float32),
                             locked=first_locked != EMPTY, info=info)
@@ -318,7 +490,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
         per[f_idx, slots[f_idx, k_idx]] = frame_labels[f_idx, k_idx]
         split = np.zeros(valid.shape, dtype=bool)
         split[segments.start, segments.slot] = True
-        labeling = segments_from_runs(layout.names, per, valid, info, split=split)
+        labeling = segments_from_runs(labels.names, per, valid, info, split=split)
         labeling.locked = locked_at[labeling.start, labeling.slot] != EMPTY
     labeling.evidence = segment_evidence(labeling, samples)
     labeling.confidence = labeling.evidence[:, 0].copy()  # the mean probability, until calibrated
