@@ -175,10 +175,10 @@ def _hands_line(labeling, confident: float = 0.95) -> str | None:
         return "one hand of two forced was found" if facts.get("forced") == 2 else None
     parts = []
     for h, side in enumerate(facts.get("sides", [])):
-        rms = facts.get("rms_mm", [None] * 2)[h]
-        fit = f", fits {side} {min(rms):.1f} mm vs {max(rms):.1f}" if rms else ""
+        fit = ""
         m = len(labeling.names) // max(count, 1)
-        hand = labeling.label_range(h * m, (h + 1) * m).summary(confident) if count == 2 else labeling.summary(confident)
+        part = labeling.label_range(h * m, (h + 1) * m) if count == 2 else labeling
+        hand = part.summary(confident)
         parts.append(f"{side} {hand['labeled_segments']} segments, {100 * hand['confident_share']:.1f} % "
                      f"confident{fit}")
     forced = " (two forced, one found)" if facts.get("forced") == 2 else ""

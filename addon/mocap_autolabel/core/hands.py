@@ -27,6 +27,7 @@ convention.
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass, field
 
@@ -46,6 +47,9 @@ AMBIGUOUS = 0.025
 PRESENT_SHARE = 1 / 3
 #: ... in at least this share of the frames that have points.
 PRESENT_FRAMES = 0.1
+#: Two hands hold more than this many times the layout's markers in the median frame (one hand's
+#: ghosts stay below: the 316 han2018 raw takes of the temporal benchmark reach at most 1.16).
+CROWDED = 1.35
 #: Seconds a trajectory must stay nearer the other hand (by :data:`SWAP_MARGIN`) to be cut there.
 SWAP_SECONDS = 0.1
 SWAP_MARGIN = 0.04
@@ -106,52 +110,68 @@ def _seed_frame(pos: np.ndarray, valid: np.ndarray, m: int) -> int:
             continue
         c, lab = _two_means(x)
         n = np.bincount(lab, minlength=2)
+        if n.min() < max(3, m / 3):  # a stray ghost is no hand
+            continue
+        # Best: the two groups' nearest points far apart for their size.
+        gap = np.min(np.linalg.norm(x[lab == 0][:, None] - x[lab == 1][None], axis=2))
         spread = np.mean(np.linalg.norm(x - c[lab], axis=1)) + 1e-3
-        score = np.linalg.norm(c[0] - c[1]) / spread + min(n.min(), m) / m
+        score = gap / spread + min(n.min(), m) / m
         if score > best_score:
             best, best_score = int(f), score
     return best
 
 
-def _track_centres(pos: np.ndarray, valid: np.ndarray, m: int, rate: float) -> np.ndarray:
-    """Two hand centres ``(F, 2, 3)`` carried frame to frame from the seed frame (NaN where lost)."""
+def _track_centres(pos: np.ndarray, valid: np.ndarray, ids: np.ndarray, m: int,
+                   rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two hand centres ``(F, 2, 3)`` carried frame to frame from the seed frame (NaN where lost),
+    and the hand each tracklet joined when first seen (-1 never near a hand).
+
+    A tracklet keeps the hand it joined: identity is carried through a contact by the trajectories
+    that live through it, and only trajectories born near both hands are placed by distance.
+    """
     frames = len(pos)
     centre = np.full((frames, 2, 3), np.nan)
+    joined = np.full(int(ids.max()) + 1 if ids.size and ids.max() >= 0 else 0, -1, dtype=np.int64)
     t0 = _seed_frame(pos, valid, m)
     x = pos[t0, valid[t0]]
     if len(x) < 2:
-        return centre
-    c0, _ = _two_means(x)
+        return centre, joined
+    c0, lab0 = _two_means(x)
+    joined[ids[t0, valid[t0]]] = lab0
     lost_after = max(1, int(LOST_SECONDS * rate))
     for order in (range(t0, frames), range(t0 - 1, -1, -1)):
         c = c0.copy()
         unseen = np.zeros(2, dtype=np.int64)
         for f in order:
-            x = pos[f, valid[f]]
+            cols = np.flatnonzero(valid[f])
+            x = pos[f, cols]
             alive = unseen < lost_after
             if len(x):
-                d = np.linalg.norm(x[:, None] - c[None], axis=2)
-                d[:, ~alive] = np.inf
-                lab = np.argmin(d, axis=1)
-                near = d[np.arange(len(x)), lab] < HAND_RADIUS
-                far = x[~near]
+                tid = ids[f, cols]
+                lab = joined[tid]
+                new = lab < 0
+                if new.any():
+                    d = np.linalg.norm(x[new, None] - c[None], axis=2)
+                    d[:, ~alive] = np.inf
+                    near = np.argmin(d, axis=1)
+                    lab[new] = np.where(d[np.arange(len(near)), near] < HAND_RADIUS, near, -1)
+                # Points far from every live hand: a lost hand comes back there.
+                lost = np.flatnonzero(unseen >= lost_after)
+                if len(lost) and (lab < 0).sum() >= 3:
+                    lab[lab < 0] = lost[0]
+                joined[tid] = np.where(joined[tid] < 0, lab, joined[tid])
                 for h in range(2):
-                    mine = x[near & (lab == h)]
+                    mine = x[lab == h]
                     if len(mine) >= 2:
-                        c[h] = mine.mean(axis=0)
+                        c[h] = np.median(mine, axis=0)
                         unseen[h] = 0
                     else:
                         unseen[h] += 1
-                # Points far from every live hand: a lost hand comes back there.
-                lost = np.flatnonzero(unseen >= lost_after)
-                if len(lost) and len(far) >= 3:
-                    c[lost[0]] = far.mean(axis=0)
-                    unseen[lost[0]] = 0
             else:
                 unseen += 1
             alive = unseen < lost_after
             centre[f] = np.where(alive[:, None], c, np.nan)
-    return centre
+    return centre, joined
 
 
 def _fill(centre: np.ndarray) -> np.ndarray:
@@ -193,26 +213,19 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
                 info={"count": 1})
     if hands == "1" or not valid.any():
         return one
-    centre = _track_centres(pos, valid, m, take.rate)
     tracklets = find_tracklets(replace_valid(take, valid))
     ids = tracklets.id_map(frames, points)
+    centre, joined = _track_centres(pos, valid, ids, m, take.rate)
     f_idx, p_idx = np.nonzero(ids >= 0)
     tid = ids[f_idx, p_idx]
     x = pos[f_idx, p_idx]
     n = len(tracklets)
     length = np.maximum(np.bincount(tid, minlength=n), 1)
-    hand_of = np.zeros(n, dtype=np.int64)
+    hand_of = joined.copy()
+    far = hand_of < 0
     for _ in range(3):
-        filled = np.stack([_fill(centre[:, h]) for h in range(2)], axis=1)
-        d = np.linalg.norm(x[:, None] - filled[f_idx], axis=2)  # (S, 2)
-        d = np.where(np.isfinite(d), d, 2 * HAND_RADIUS)
-        mean = np.stack([np.bincount(tid, weights=np.minimum(d[:, h], 2 * HAND_RADIUS), minlength=n) / length
-                         for h in range(2)], axis=1)
-        hand_of = np.argmin(mean, axis=1)
-        far = mean[np.arange(n), hand_of] > HAND_RADIUS
-        # Centres again, from whole tracklets.
-        own = hand_of[tid]
-        keep = ~far[tid]
+        # Centres from whole tracklets, then each tracklet to the hand it stays clearly nearer.
+        own, keep = hand_of[tid], ~far[tid]
         centre = np.full((frames, 2, 3), np.nan)
         for h in range(2):
             sel = keep & (own == h)
@@ -221,6 +234,15 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
                 s = np.bincount(f_idx[sel], weights=x[sel, k], minlength=frames)
                 with np.errstate(invalid="ignore", divide="ignore"):
                     centre[:, h, k] = np.where(count > 0, s / np.maximum(count, 1), np.nan)
+        filled = np.stack([_fill(centre[:, h]) for h in range(2)], axis=1)
+        d = np.linalg.norm(x[:, None] - filled[f_idx], axis=2)  # (S, 2)
+        d = np.where(np.isfinite(d), d, 2 * HAND_RADIUS)
+        mean = np.stack([np.bincount(tid, weights=np.minimum(d[:, h], 2 * HAND_RADIUS), minlength=n) / length
+                         for h in range(2)], axis=1)
+        nearer = np.argmin(mean, axis=1)
+        switch = (hand_of < 0) | (mean[np.arange(n), np.maximum(hand_of, 0)] - mean[np.arange(n), nearer] > AMBIGUOUS)
+        hand_of = np.where(switch, nearer, hand_of)
+        far = mean[np.arange(n), hand_of] > HAND_RADIUS
     # Is there a second hand? Count the markers each hand holds per frame.
     own = hand_of[tid]
     keep = ~far[tid]
@@ -228,8 +250,13 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
     with_points = max(int(valid.any(axis=1).sum()), 1)
     present = per_frame >= max(3, int(np.ceil(PRESENT_SHARE * m)))
     share = present.sum(axis=0) / with_points
-    real = share >= PRESENT_FRAMES
+    # A hand split in two looks like two small hands: two hands also need more points than one
+    # hand has markers, in the typical frame.
+    total = per_frame.sum(axis=1)[valid.any(axis=1)]
+    crowded = float(np.median(total)) >= CROWDED * m if len(total) else False
+    real = (share >= PRESENT_FRAMES) & (crowded or hands == "2")
     info = {"present_share": [round(float(s), 4) for s in share],
+            "median_points": float(np.median(total)) if len(total) else 0.0,
             "median_markers": [int(np.median(per_frame[present[:, h], h])) if present[:, h].any() else 0
                                for h in range(2)]}
     if hands == "auto" and not real.all():
@@ -297,56 +324,75 @@ def _swap_cuts(tracklets, hand_of: np.ndarray, far: np.ndarray, d: np.ndarray, f
 
 @dataclass(frozen=True)
 class SideEvidence:
-    """How well a left and a right model hand fit one hand's labeled markers (median marker RMS, metres)."""
+    """Handedness read off one hand's labeled markers: in how many frames the layout's most
+    chiral marker tetrahedron turns as on a right hand (``right``) or as on a left one (``left``)."""
 
-    rms_left: float
-    rms_right: float
+    left: int
+    right: int
 
     @property
     def side(self) -> str:
-        return "left" if self.rms_left < self.rms_right else "right"
+        return "left" if self.left > self.right else "right"
 
     @property
     def confidence(self) -> float:
-        """In [0.5, 1]: 0.5 when both sides fit alike, 1 when one fits twice as well or better."""
-        lo, hi = sorted((self.rms_left, self.rms_right))
-        if not np.isfinite(hi) or hi <= 0:
-            return 0.5
-        return float(min(1.0, 0.5 + 0.5 * (hi - lo) / max(lo, 1e-9)))
+        """The share of frames that agree with :attr:`side` (0.5: no evidence)."""
+        total = self.left + self.right
+        return 0.5 if total == 0 else max(self.left, self.right) / total
 
-    def rms(self, side: str) -> float:
-        return self.rms_left if side == "left" else self.rms_right
+    def log_odds_right(self) -> float:
+        """log P(right) / P(left), with one frame of doubt on each side."""
+        return float(np.log((self.right + 1) / (self.left + 1)))
+
+
+@functools.lru_cache(maxsize=16)
+def chiral_tetrahedron(layout: Layout, poses: int = 96, seed: int = 0) -> tuple[tuple[int, int, int, int], float]:
+    """The four markers of ``layout`` whose signed volume keeps its sign best over random poses of
+    an average right hand (a mirror image flips it), and that sign's consistency in [0, 1]."""
+    from itertools import combinations
+
+    from .hand.ik import HandSolver
+    from .hand.skeleton import N_DOF, HandModel
+    from .synth.poses import sample_joint_angles
+
+    hand = HandModel(side="right")
+    pose = np.zeros((poses, N_DOF))
+    pose[:, 6:] = sample_joint_angles(np.random.default_rng(seed), poses)
+    x = HandSolver(hand, layout.place(hand)[0]).markers(pose)  # (P, M, 3)
+    quads = np.array(list(combinations(range(len(layout)), 4)))
+    e = x[:, quads[:, 1:]] - x[:, quads[:, :1]]  # (P, Q, 3, 3)
+    vol = np.linalg.det(e)  # (P, Q)
+    # Consistent sign and not nearly flat: the share of poses with the majority sign, then size.
+    sign = np.sign(np.median(vol, axis=0))
+    agree = (np.sign(vol) == sign).mean(axis=0)
+    size = np.median(np.abs(vol), axis=0) ** (1 / 3)
+    best = int(np.lexsort((size, np.round(agree, 2)))[-1])
+    q = tuple(int(v) for v in quads[best])
+    return (q if sign[best] > 0 else (q[1], q[0], q[2], q[3])), float(agree[best])
 
 
 def side_evidence(observed: np.ndarray, layout: Layout) -> SideEvidence | None:
-    """Fit a left and a right average hand to ``observed (F, M, 3)`` labeled markers (metres, NaN
-    where missing); None where too few frames show enough markers."""
-    from .hand.calibrate import _well_seen
-    from .hand.ik import HandSolver
-    from .hand.skeleton import HandModel
-
-    try:
-        frames = _well_seen(observed)
-    except ValueError:
+    """Handedness of ``observed (F, M, 3)`` labeled markers (metres, NaN where missing): the sign
+    of :func:`chiral_tetrahedron`'s volume in every frame that sees its four markers; None where
+    no frame does."""
+    quad, _ = chiral_tetrahedron(layout)
+    x = observed[:, list(quad)]
+    seen = np.isfinite(x).all(axis=(1, 2))
+    if not seen.any():
         return None
-    frames = frames[np.linspace(0, len(frames) - 1, min(24, len(frames))).astype(int)]
-    rms = {}
-    for side in SIDES:
-        h = HandModel(side=side)
-        solver = HandSolver(h, layout.place(h)[0])
-        rms[side] = float(np.nanmedian(solver.evaluate(solver.cold_start(observed[frames]), observed[frames]).rms))
-    return SideEvidence(rms["left"], rms["right"])
+    vol = np.linalg.det(x[seen, 1:] - x[seen, :1])
+    return SideEvidence(left=int((vol < 0).sum()), right=int((vol > 0).sum()))
 
 
 def decide_sides(evidence: list[SideEvidence | None], forced: list[str] | None = None) -> tuple[list[str], dict]:
     """The side of each hand, and facts for the report.
 
-    One hand takes the side that fits it better. Two hands are one left and one right: the
-    pairing whose summed RMS is lower wins (a take whose hands both fit a right hand better is
-    called so jointly, and the report says it). ``forced`` overrides the decision.
+    One hand takes the side most of its frames show. Two hands are one left and one right: the
+    one whose frames say "right" more strongly is the right hand (a take whose hands both look
+    like right hands is still called one left, one right, and the report warns). ``forced``
+    overrides the decision.
     """
-    facts: dict = {"rms_mm": [None if e is None else [round(e.rms_left * 1000, 2), round(e.rms_right * 1000, 2)]
-                              for e in evidence]}
+    facts: dict = {"frames_left_right": [None if e is None else [e.left, e.right] for e in evidence]}
     if forced is not None:
         if len(forced) != len(evidence) or any(s not in SIDES for s in forced):
             raise ValueError(f"sides must name {len(evidence)} of {', '.join(SIDES)}, not {forced}")
@@ -360,24 +406,15 @@ def decide_sides(evidence: list[SideEvidence | None], forced: list[str] | None =
         facts.update(sides=sides, confidence=0.5 if e is None else round(e.confidence, 4))
         return sides, facts
     a, b = evidence
-    if a is None and b is None:
-        sides, conf = ["left", "right"], 0.5
-    elif a is None or b is None:
-        known = a if a is not None else b
-        s = known.side
-        sides = [s, _other(s)] if a is not None else [_other(s), s]
-        conf = known.confidence
-    else:
-        lr = a.rms_left + b.rms_right
-        rl = a.rms_right + b.rms_left
-        sides = ["left", "right"] if lr <= rl else ["right", "left"]
-        lo, hi = sorted((lr, rl))
-        conf = float(min(1.0, 0.5 + 0.5 * (hi - lo) / max(lo, 1e-9)))
-        if a.side == b.side:
-            facts["warning"] = (f"both hands fit a {a.side} hand better (RMS left/right "
-                                f"{a.rms_left * 1000:.1f}/{a.rms_right * 1000:.1f} and "
-                                f"{b.rms_left * 1000:.1f}/{b.rms_right * 1000:.1f} mm); called "
-                                f"{sides[0]} and {sides[1]} by the joint fit: check the sides (--sides)")
+    ra = 0.0 if a is None else a.log_odds_right()
+    rb = 0.0 if b is None else b.log_odds_right()
+    # One left, one right: hand b is the right one when its odds beat hand a's.
+    sides = ["left", "right"] if rb >= ra else ["right", "left"]
+    conf = float(1 / (1 + np.exp(-abs(rb - ra))))
+    if a is not None and b is not None and a.side == b.side and min(a.confidence, b.confidence) > 0.9:
+        facts["warning"] = (f"both hands look like {a.side} hands ({100 * a.confidence:.0f} % and "
+                            f"{100 * b.confidence:.0f} % of their frames); called {sides[0]} and {sides[1]}: "
+                            f"check the sides (--sides)")
     facts.update(sides=sides, confidence=round(conf, 4))
     return sides, facts
 

@@ -1,0 +1,153 @@
+"""Synthetic takes of two hands that interact: approach, touch, clap, interlace, cross and occlude
+each other, with truth that records each sample's hand.
+
+Each hand is a clean synthetic hand of its own size (:func:`.generate.synthesize` with no
+corruption); the right hand is then carried along the left one's path by an interaction schedule
+(apart, approaching, touching or interlaced, crossing over), markers of a hand buried in the
+other are hidden, and the pair is corrupted as the temporal benchmark corrupts raw takes
+(:func:`.generate.corrupt_take`: gaps, fragments, a swap, flicker and persistent ghosts).
+Hands may pass through each other: closer than real hands only makes the task harder.
+
+Truth labels: ``0 .. M-1`` the left hand's markers, ``M .. 2M-1`` the right hand's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..layout import Layout
+from .generate import SynthTake, TakeCorruption, clean_config, corrupt_take, synthesize
+
+#: What the hands do in each phase of the schedule.
+PHASES = ("apart", "touch", "clap", "interlace", "cross")
+
+
+@dataclass(frozen=True)
+class TwoHandConfig:
+    """Settings of a two-hand take (metres, seconds).
+
+    Attributes:
+        apart: distance between the hands' centres while apart, drawn per phase from this range.
+        close: distance between the centres while touching, clapping or interlaced (the nearest
+            markers of the two hands then lie within a few centimetres).
+        phase_s: length of a phase, drawn from this range; phases ease into each other over 0.3 s.
+        close_share: share of the phases in which the hands are close (touch, clap, interlace, cross).
+        bury: a marker nearer than this to a marker of the other hand, while the hands are close,
+            is hidden (the other hand covers it) with probability ``bury_share``.
+        corruption: gaps, fragments, swaps and ghosts as in the temporal benchmark's raw takes.
+    """
+
+    apart: tuple[float, float] = (0.2, 0.4)
+    close: tuple[float, float] = (0.07, 0.12)
+    phase_s: tuple[float, float] = (0.8, 2.5)
+    close_share: float = 0.5
+    bury: float = 0.02
+    bury_share: float = 0.7
+    corruption: TakeCorruption | None = None
+
+
+def synthesize_two_hands(layout: Layout, frames: int, seed: int = 0, config: TwoHandConfig | None = None,
+                         rate: float = 120.0) -> tuple[SynthTake, SynthTake, np.ndarray, np.ndarray, list]:
+    """Two interacting hands of independent sizes, clean (see :func:`two_hand_take` for a raw take).
+
+    Returns:
+        ``(left, right, a, b, phases)``: the two clean synthetic hands, their markers ``(F, M, 3)``
+        in the shared world frame (the right hand moved by the schedule; NaN where buried in the
+        other hand) and the schedule's phases ``(start, stop, kind)``.
+    """
+    cfg = config or TwoHandConfig()
+    rng = np.random.default_rng([seed, 22])
+    base = replace(clean_config(), rate=rate)
+    left = synthesize(layout, frames, seed=2 * seed + 1, config=replace(base, side="left"))
+    right = synthesize(layout, frames, seed=2 * seed + 2, config=replace(base, side="right"))
+    a, b = left.markers.copy(), right.markers.copy()
+    # The schedule: per phase, the right hand's centre relative to the left one's.
+    offset, phases = _schedule(rng, frames, rate, cfg)
+    ca, cb = a.mean(axis=1), b.mean(axis=1)
+    b += (ca + offset - cb)[:, None, :]
+    # Markers buried in the other hand while the hands are close.
+    d = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=3)
+    hide_a = (d.min(axis=2) < cfg.bury) & (rng.random(a.shape[:2]) < cfg.bury_share)
+    hide_b = (d.min(axis=1) < cfg.bury) & (rng.random(b.shape[:2]) < cfg.bury_share)
+    a[hide_a], b[hide_b] = np.nan, np.nan
+    return left, right, a, b, phases
+
+
+def _schedule(rng: np.random.Generator, frames: int, rate: float,
+              cfg: TwoHandConfig) -> tuple[np.ndarray, list[tuple[int, int, str]]]:
+    """``(F, 3)`` offset of the right hand's centre from the left one's, and the phases
+    ``(start, stop, kind)``."""
+    targets, phases, t = [], [], 0
+    while t < frames:
+        length = max(2, int(rng.uniform(*cfg.phase_s) * rate))
+        kind = "apart" if rng.random() >= cfg.close_share else str(rng.choice(PHASES[1:]))
+        direction = rng.normal(size=3)
+        direction[2] *= 0.3  # mostly side by side, as hands are held
+        direction /= np.linalg.norm(direction)
+        if kind == "apart":
+            start = end = direction * rng.uniform(*cfg.apart)
+            if direction[0] < 0:  # the right hand stays to the right while apart
+                start = end = start * np.array([-1.0, 1.0, 1.0])
+        elif kind == "cross":  # from one side to the other, passing close
+            start = np.array([rng.uniform(*cfg.apart), 0.0, 0.0])
+            end = -start
+            start[1] = end[1] = rng.uniform(*cfg.close) * rng.choice([-1, 1])
+        else:  # touch, clap, interlace: close together, a little motion
+            dist = rng.uniform(*cfg.close) * (0.6 if kind == "interlace" else 1.0)
+            start = direction * dist
+            end = start + rng.normal(0.0, 0.01, size=3)
+        stop = min(frames, t + length)
+        w = np.linspace(0.0, 1.0, stop - t)[:, None]
+        targets.append(start * (1 - w) + end * w)
+        phases.append((t, stop, kind))
+        t = stop
+    offset = np.concatenate(targets)[:frames]
+    ease = max(1, int(0.3 * rate))
+    kernel = np.ones(ease) / ease
+    smooth = np.stack([np.convolve(np.pad(offset[:, k], (ease // 2, ease - 1 - ease // 2), mode="edge"), kernel,
+                                   mode="valid") for k in range(3)], axis=1)
+    return smooth, phases
+
+
+@dataclass
+class TwoHandTake:
+    """A raw take of two hands and its truth.
+
+    Attributes:
+        take: the unlabeled take (``*N`` slots, metres).
+        labels: int16 ``(F, S)``: ``0 .. M-1`` left hand, ``M .. 2M-1`` right hand, ghost -1, empty -2.
+        markers: ``(F, 2M, 3)`` true marker positions (NaN where buried), left hand first.
+        sides: ``["left", "right"]``; hands: the two :class:`.generate.SynthTake` they were made from.
+        phases: ``(start, stop, kind)`` of the interaction schedule.
+        gap: ``(F,)`` metres: the distance between the nearest markers of the two hands.
+    """
+
+    take: object
+    labels: np.ndarray
+    markers: np.ndarray
+    hands: tuple[SynthTake, SynthTake]
+    phases: list
+    gap: np.ndarray
+    seed: int
+
+    @property
+    def layout(self) -> Layout:
+        return self.hands[0].layout
+
+
+def two_hand_take(layout: Layout, frames: int, seed: int = 0, config: TwoHandConfig | None = None,
+                  rate: float = 120.0) -> TwoHandTake:
+    """A raw take of two interacting hands (see the module's docstring); deterministic in ``seed``."""
+    cfg = config or TwoHandConfig()
+    left, right, a, b, phases = synthesize_two_hands(layout, frames, seed, cfg, rate)
+    markers = np.concatenate([a, b], axis=1)
+    take, truth, _ = corrupt_take(markers, rate, seed, cfg.corruption)
+    d = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=3)
+    gap = np.nanmin(np.where(np.isfinite(d), d, np.inf).reshape(frames, -1), axis=1)
+    return TwoHandTake(replace(take, vendor="mocap_autolabel synth (two hands)"), truth, markers, (left, right),
+                       phases, gap, seed)
+
+
+__all__ = ["PHASES", "TwoHandConfig", "TwoHandTake", "synthesize_two_hands", "two_hand_take"]
