@@ -51,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--rate", type=float, default=120.0, help="frames per second (default 120)")
     syn.add_argument("--side", choices=("left", "right"), help="hand side (default: drawn at random)")
     syn.add_argument("--clean", action="store_true", help="no noise, occlusion, ghosts or merges")
+    syn.add_argument("--hands", type=int, choices=(1, 2), default=1,
+                     help="2: a left and a right hand that touch, clap, interlace and cross (default 1)")
     syn.add_argument("-o", "--output", required=True, metavar="OUT.c3d",
                      help="the take to write; the truth goes beside it as OUT.truth.npz")
     syn.add_argument("--blend", metavar="OUT.blend",
@@ -107,7 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
     sol.add_argument("--contacts", metavar="FRAME:FINGER,...",
                      help="pinch frames (0-based) for the calibration, e.g. 120:index,300:middle: there the "
                           "thumb's pad touches that finger's pad")
-    sol.add_argument("--side", choices=("left", "right"), help="hand side (default: detected)")
+    sol.add_argument("--side", choices=("left", "right"), help="hand side of a one-hand take (default: detected)")
+    sol.add_argument("--hand-names", metavar="CONVENTION",
+                     help="how the labels carry their hand's side (default: any of prefix L_ThumbTip, suffix "
+                          "ThumbTip_L, vicon LeftHand:ThumbTip); see label --hand-names")
     sol.add_argument("--smooth-hz", type=float, default=10.0, help="low-pass cut-off of the pose track (0: off)")
     sol.add_argument("--report", metavar="REPORT.json", help="per-frame and overall marker RMS (mm), calibration")
 
@@ -410,8 +415,9 @@ def _solve(args) -> int:
     from .core.atomic import atomic_output
     from .core.errors import MocapInputError
     from .core.hand.calibrate import Calibration
+    from .core.hands import HandNaming, sided_path, split_hands
     from .core.layout import load_layout
-    from .core.pipeline import solve_take
+    from .core.pipeline import solve_hands
     from .core.take import read_take
 
     outputs = (("--blend", args.blend, ".blend"), ("--fbx", args.fbx, ".fbx"), ("--bvh", args.bvh, ".bvh"))
@@ -445,38 +451,50 @@ def _solve(args) -> int:
             return EXIT_FAILED
     try:
         layout = load_layout(args.layout)
-        calibration = Calibration.load(args.calibration) if args.calibration else None
+        calibrations = [Calibration.load(p) for p in args.calibration.split(",")] if args.calibration else []
         take = read_take(args.file)
         if reference is not None and reference.stop > take.n_frames:
             raise MocapInputError(args.file, f"has {take.n_frames} frames; --reference-frames ends at {reference.stop}")
-        solved = solve_take(take, layout, calibration=calibration, calibrate_seconds=args.calibrate_seconds,
-                            reference=reference, contacts=contacts, side=args.side, smooth_hz=args.smooth_hz)
+        naming = HandNaming(args.hand_names) if args.hand_names else None
+        sides = [side for side, _ in split_hands(take, layout, naming)]
+        if len(sides) > 1 and args.side:
+            raise MocapInputError(args.file, "holds two hands, named by side: --side is for a one-hand take")
+        by_side = {("" if len(sides) == 1 and not sides[0] else c.side): c for c in calibrations}
+        if len(calibrations) > len(sides) or len(by_side) < len(calibrations):
+            raise MocapInputError(args.calibration, f"give one calibration per hand ({len(sides)} in the take)")
+        solved = solve_hands(take, layout, naming, by_side, calibrate_seconds=args.calibrate_seconds,
+                             reference=reference, contacts=contacts, side=args.side, smooth_hz=args.smooth_hz)
     except Exception as exc:
         return _fail(args.file, exc)
-    report = solved.report() | {"file": args.file}
-    cal = solved.calibration
-    fps = take.n_frames / max(solved.seconds["solve"], 1e-9)
-    print(f"{args.file}: {cal.side} hand {cal.length * 1000:.1f} x {cal.breadth * 1000:.1f} mm on {layout.name}; "
-          f"{report['solved_frames']} of {take.n_frames} frames solved in {solved.seconds['solve']:.2f} s "
-          f"({fps:,.0f} frames/s); marker RMS {report['marker_rms_mm']:.2f} mm, "
-          f"{report['frames_over_gate']} frames over the {report['gate_mm']:g} mm gate")
-    if args.calibration is None:
-        print(f"  calibrated on {len(cal.frames)} frames: RMS {cal.rms_before * 1000:.2f} -> "
-              f"{cal.rms_after * 1000:.2f} mm")
-    if args.save_calibration:
-        cal.save(args.save_calibration)
-        print(f"  calibration {args.save_calibration}")
+    reports = []
+    for side, one in solved:
+        report = one.report() | {"file": args.file} | ({"side": side} if side else {})
+        reports.append(report)
+        cal = one.calibration
+        fps = take.n_frames / max(one.seconds["solve"], 1e-9)
+        print(f"{args.file}: {cal.side} hand {cal.length * 1000:.1f} x {cal.breadth * 1000:.1f} mm on {layout.name}; "
+              f"{report['solved_frames']} of {take.n_frames} frames solved in {one.seconds['solve']:.2f} s "
+              f"({fps:,.0f} frames/s); marker RMS {report['marker_rms_mm']:.2f} mm, "
+              f"{report['frames_over_gate']} frames over the {report['gate_mm']:g} mm gate")
+        if side not in by_side:
+            print(f"  calibrated on {len(cal.frames)} frames: RMS {cal.rms_before * 1000:.2f} -> "
+                  f"{cal.rms_after * 1000:.2f} mm")
+        if args.save_calibration:
+            path = sided_path(args.save_calibration, side)
+            cal.save(path)
+            print(f"  calibration {path}")
     if bpy is not None:
         from .blender.export import write_solved_scene
 
-        try:  # the labeled markers beside the calibrated, animated rig; then .blend, FBX and BVH
-            for kind, path in write_solved_scene(take, solved, args.blend, args.fbx, args.bvh).items():
+        try:  # the labeled markers beside the calibrated, animated rig(s); then .blend, FBX and BVH
+            rigs = solved if solved[0][0] else solved[0][1]
+            for kind, path in write_solved_scene(take, rigs, args.blend, args.fbx, args.bvh).items():
                 print(f"  {kind:8s} {path}")
         except Exception as exc:
             return _fail(args.file, exc)
     if args.report:
         with atomic_output(args.report) as tmp, open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(report, fh, indent=1)
+            json.dump(reports[0] if len(reports) == 1 else {"file": args.file, "hands": reports}, fh, indent=1)
         print(f"  report   {args.report}")
     return EXIT_OK
 
@@ -572,6 +590,8 @@ def _synth(args) -> int:
         layout = load_layout(args.layout)
     except Exception as exc:
         return _fail(args.layout, exc)
+    if args.hands == 2:
+        return _synth_two(args, layout)
     config = dataclasses.replace(clean_config() if args.clean else SynthConfig(), rate=args.rate, side=args.side)
     synth = synthesize(layout, args.frames, seed=args.seed, config=config)
     try:
@@ -587,6 +607,31 @@ def _synth(args) -> int:
     print(f"  truth    {truth_path}")
     if args.blend:
         return _synth_blend(synth, args.blend)
+    return EXIT_OK
+
+
+def _synth_two(args, layout) -> int:
+    """``synth --hands 2``: two interacting hands (left and right, sizes of their own)."""
+    from .core.synth.generate import GHOST
+    from .core.synth.two_hands import save_two_hands, two_hand_take
+
+    if args.clean or args.side or args.blend:
+        print("mocap_autolabel synth: error: --hands 2 takes no --clean, --side or --blend", file=sys.stderr)
+        return EXIT_USAGE
+    if args.frames < 1:
+        print(f"mocap_autolabel synth: error: --frames must be positive, got {args.frames}", file=sys.stderr)
+        return EXIT_USAGE
+    two = two_hand_take(layout, args.frames, seed=args.seed, rate=args.rate)
+    try:
+        take_path, truth = save_two_hands(two, args.output)
+    except OSError as exc:
+        print(f"error: {args.output}: cannot write ({exc.strerror or exc})", file=sys.stderr)
+        return EXIT_FAILED
+    sizes = ", ".join(f"{h.hand.side} {h.hand.length * 1000:.0f} x {h.hand.breadth * 1000:.0f} mm" for h in two.hands)
+    print(f"{take_path}: two hands of {layout.name} ({2 * len(layout)} markers), {args.frames} frames at "
+          f"{args.rate:g} Hz ({sizes}), hands within 5 cm in {100 * (two.gap < 0.05).mean():.0f} % of frames, "
+          f"{two.take.n_points} slots, {(two.labels == GHOST).sum() / args.frames:.2f} ghosts per frame")
+    print(f"  truth    {truth}")
     return EXIT_OK
 
 

@@ -56,27 +56,40 @@ def write_solved_scene(take, solved, blend: str | None = None, fbx: str | None =
                        bvh: str | None = None) -> dict[str, str]:
     """A fresh scene with the labeled markers beside the solved, keyed rig; then the asked-for files.
 
-    Returns ``{"blend" | "fbx" | "bvh": path}`` of what was written.
+    ``solved`` is one HandSolve, or ``[(side, HandSolve), ...]`` for a take of two hands: one rig
+    per hand in the one .blend (armatures ``Hand_L`` / ``Hand_R``, collections ``left hand`` /
+    ``right hand``), and one FBX / BVH per hand with the side before the extension
+    (``take_left.fbx``).
+
+    Returns ``{"blend" | "fbx" | "bvh" (+ "_left" / "_right"): path}`` of what was written.
     """
+    from ..core.hands import sided_path
     from .armature import build_solved_hand, solved_hand_collection
     from .scene import ImportOptions, build_take
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     coll = build_take(take, scene, ImportOptions())
-    arm = build_solved_hand(solved, solved_hand_collection(scene, coll.name, "Hand"))
-    first, last = solved.first_frame, solved.first_frame + take.n_frames - 1
+    hands = solved if isinstance(solved, list) else [("", solved)]
+    rigs = []
+    for side, one in hands:
+        name = f"Hand_{side[0].upper()}" if side else "Hand"
+        folder = solved_hand_collection(scene, f"{coll.name}:{side}" if side else coll.name,
+                                        f"{side} hand" if side else "Hand")
+        rigs.append((side, one, build_solved_hand(one, folder, name=name)))
     out = {}
     if blend:
         save_blend(blend)
         out["blend"] = blend
-    if fbx:
-        export_fbx(arm, fbx, first, last)
-        out["fbx"] = fbx
-    if bvh:
-        export_bvh(arm, bvh, first, last)
-        out["bvh"] = bvh
+    for side, one, arm in rigs:
+        first, last = one.first_frame, one.first_frame + take.n_frames - 1
+        key = f"_{side}" if side else ""
+        for kind, path, export in (("fbx", fbx, export_fbx), ("bvh", bvh, export_bvh)):
+            if path:
+                export(arm, sided_path(path, side), first, last)
+                out[kind + key] = sided_path(path, side)
     return out
+
 
 
 def write_review_scene(take, layout_ref: str, labeling, blend: str, method: str = "set", temporal: str = "vote",

@@ -504,3 +504,14 @@ def split_hands(take: Take, layout: Layout, naming: HandNaming | None = None) ->
         out.append((side, replace(take, positions=take.positions[:, cols], names=list(layout.names), residuals=res)))
     return out
 
+
+
+def sided_path(path: str, side: str) -> str:
+    """``take.fbx`` -> ``take_left.fbx``: an output of one hand of a two-hand take (unchanged for
+    side ``""``, a one-hand take)."""
+    if not side:
+        return path
+    import os
+
+    stem, ext = os.path.splitext(path)
+    return f"{stem}_{side}{ext}"

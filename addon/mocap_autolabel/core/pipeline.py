@@ -650,3 +650,24 @@ def solve_take(take: Take, layout: Layout, calibration: Calibration | None = Non
     fit = calibration.solver(layout).solve(observed, rate=take.rate, smooth_hz=smooth_hz)
     seconds["solve"] = round(time.perf_counter() - start, 4)
     return HandSolve(calibration, fit, layout, float(take.rate), int(take.first_frame), seconds)
+
+
+def solve_hands(take: Take, layout: Layout, naming: HandNaming | None = None,
+                calibrations: dict[str, Calibration] | None = None, **options) -> list[tuple[str, HandSolve]]:
+    """Solve every hand of a labeled take: ``[(side, HandSolve)]``, side ``""`` for a take labeled
+    with plain names (one hand), else ``"left"`` / ``"right"`` read off the names
+    (:func:`.hands.split_hands`); each hand calibrated on its own (size, side, marker offsets)
+    unless ``calibrations[side]`` is given. ``options`` go to :func:`solve_take`."""
+    from .hands import split_hands
+
+    out = []
+    for side, one in split_hands(take, layout, naming):
+        given = (calibrations or {}).get(side)
+        kwargs = dict(options)
+        if side and kwargs.get("side") is None:
+            kwargs["side"] = side
+        try:
+            out.append((side, solve_take(one, layout, calibration=given, **kwargs)))
+        except MocapInputError as exc:
+            raise MocapInputError(take.source, f"{side} hand: {exc.problem}" if side else exc.problem) from exc
+    return out

@@ -320,7 +320,12 @@ def save_synth(synth: SynthTake, path: str | os.PathLike) -> tuple[str, str]:
         "poses": synth.poses.astype(np.float32),
         "info": np.array(json.dumps(info, sort_keys=True)),
     }
-    out = truth_path(path)
+    return path, write_truth(path, arrays)
+
+
+def write_truth(take_path: str, arrays: dict[str, np.ndarray]) -> str:
+    """Write the truth sidecar of ``take_path`` (atomic and byte-stable); returns its path."""
+    out = truth_path(take_path)
     with atomic_output(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         for key, arr in arrays.items():
             # A fixed timestamp: numpy.savez stamps the current time, which breaks byte-identity.
@@ -329,7 +334,7 @@ def save_synth(synth: SynthTake, path: str | os.PathLike) -> tuple[str, str]:
             buf = io.BytesIO()
             np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
             z.writestr(entry, buf.getvalue())
-    return path, out
+    return out
 
 
 def load_truth(path: str | os.PathLike) -> dict:

@@ -13,12 +13,17 @@ Truth labels: ``0 .. M-1`` the left hand's markers, ``M .. 2M-1`` the right hand
 
 from __future__ import annotations
 
+import dataclasses
+import json
+import os
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..formats.c3d import write_c3d
+from ..hands import HandNaming
 from ..layout import Layout
-from .generate import SynthTake, TakeCorruption, clean_config, corrupt_take, synthesize
+from .generate import EMPTY, GHOST, SynthTake, TakeCorruption, clean_config, corrupt_take, synthesize, write_truth
 
 #: What the hands do in each phase of the schedule.
 PHASES = ("apart", "touch", "clap", "interlace", "cross")
@@ -150,4 +155,29 @@ def two_hand_take(layout: Layout, frames: int, seed: int = 0, config: TwoHandCon
                        phases, gap, seed)
 
 
-__all__ = ["PHASES", "TwoHandConfig", "TwoHandTake", "synthesize_two_hands", "two_hand_take"]
+def save_two_hands(two: TwoHandTake, path: str | os.PathLike, config: TwoHandConfig | None = None) -> tuple[str, str]:
+    """Write the raw take as C3D (``*N``, mm) and its truth beside it (``take.truth.npz``, as
+    :func:`.generate.save_synth` does: ``labels`` (F, S), ``markers`` (F, 2M, 3), ``poses``
+    (F, 2, 26), ``info`` with the names of both hands' labels (``L_``/``R_``), each hand, the
+    seed and the schedule); both atomic and byte-stable."""
+    path = os.fspath(path)
+    write_c3d(two.take, path)
+    naming = HandNaming()
+    info = {
+        "layout": two.layout.name,
+        "hands": 2,
+        "names": naming.names("left", two.layout) + naming.names("right", two.layout),
+        "labels": {"ghost": GHOST, "empty": EMPTY, "right_hand_from": len(two.layout)},
+        "hand": [{"length_m": h.hand.length, "breadth_m": h.hand.breadth, "side": h.hand.side} for h in two.hands],
+        "seed": two.seed,
+        "rate": two.take.rate,
+        "phases": [[int(a), int(b), k] for a, b, k in two.phases],
+        "config": dataclasses.asdict(config or TwoHandConfig()),
+    }
+    arrays = {"labels": two.labels, "markers": two.markers.astype(np.float32),
+              "poses": np.stack([h.poses for h in two.hands], axis=1).astype(np.float32),
+              "info": np.array(json.dumps(info, sort_keys=True, default=str))}
+    return path, write_truth(path, arrays)
+
+
+__all__ = ["PHASES", "save_two_hands", "TwoHandConfig", "TwoHandTake", "synthesize_two_hands", "two_hand_take"]
