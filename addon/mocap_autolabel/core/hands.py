@@ -47,8 +47,9 @@ AMBIGUOUS = 0.025
 PRESENT_SHARE = 1 / 3
 #: ... in at least this share of the frames that have points.
 PRESENT_FRAMES = 0.1
-#: Two hands hold more than this many times the layout's markers in the median frame (one hand's
-#: ghosts stay below: the 316 han2018 raw takes of the temporal benchmark reach at most 1.16).
+#: Two hands hold more than this many times the layout's markers in the median frame where both
+#: are present (one hand's ghosts stay below: the 316 han2018 raw takes of the temporal benchmark
+#: reach at most 1.16 points per marker in their median frame).
 CROWDED = 1.35
 #: Seconds a trajectory must stay nearer the other hand (by :data:`SWAP_MARGIN`) to be cut there.
 SWAP_SECONDS = 0.1
@@ -213,6 +214,13 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
                 info={"count": 1})
     if hands == "1" or not valid.any():
         return one
+    counts = valid.sum(axis=1)
+    if (counts >= CROWDED * m).sum() < PRESENT_FRAMES * (counts > 0).sum():
+        # Too few crowded frames for two hands even before any point is set aside: no need to look.
+        one.info.update(count=1, crowded_share=round(float((counts >= CROWDED * m).mean()), 4))
+        if hands == "2":
+            one.info["forced"] = 2
+        return one
     tracklets = find_tracklets(replace_valid(take, valid))
     ids = tracklets.id_map(frames, points)
     centre, joined = _track_centres(pos, valid, ids, m, take.rate)
@@ -250,23 +258,18 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
     with_points = max(int(valid.any(axis=1).sum()), 1)
     present = per_frame >= max(3, int(np.ceil(PRESENT_SHARE * m)))
     share = present.sum(axis=0) / with_points
-    # A hand split in two looks like two small hands: two hands also need more points than one
-    # hand has markers, in the typical frame.
-    total = per_frame.sum(axis=1)[valid.any(axis=1)]
-    crowded = float(np.median(total)) >= CROWDED * m if len(total) else False
-    real = (share >= PRESENT_FRAMES) & (crowded or hands == "2")
+    # A hand split in two looks like two small hands: two hands also hold more points than one
+    # hand has markers, in the typical frame where both are present.
+    both_present = present.all(axis=1)
+    total = per_frame.sum(axis=1)[both_present]
+    crowded = bool(len(total)) and float(np.median(total)) >= CROWDED * m
+    real = (share >= PRESENT_FRAMES) & crowded
     info = {"present_share": [round(float(s), 4) for s in share],
-            "median_points": float(np.median(total)) if len(total) else 0.0,
+            "median_points_both": float(np.median(total)) if len(total) else 0.0,
             "median_markers": [int(np.median(per_frame[present[:, h], h])) if present[:, h].any() else 0
                                for h in range(2)]}
-    if hands == "auto" and not real.all():
-        one.info.update(info, count=1)
-        return one
-    if not real.any():
-        one.info.update(info, count=1)
-        return one
-    if hands == "2" and not real.all():
-        one.info.update(info, count=1, forced=2)
+    if not real.all():
+        one.info.update(info, count=1, **({"forced": 2} if hands == "2" else {}))
         return one
     # Two hands: per sample, its tracklet's hand; offered to both where the tracklet is ambiguous.
     margin = np.abs(mean[:, 0] - mean[:, 1])

@@ -1,12 +1,11 @@
 """Synthetic takes of two hands that interact: approach, touch, clap, interlace, cross and occlude
 each other, with truth that records each sample's hand.
 
-Each hand is a clean synthetic hand of its own size (:func:`.generate.synthesize` with no
-corruption); the right hand is then carried along the left one's path by an interaction schedule
-(apart, approaching, touching or interlaced, crossing over), markers of a hand buried in the
-other are hidden, and the pair is corrupted as the temporal benchmark corrupts raw takes
-(:func:`.generate.corrupt_take`: gaps, fragments, a swap, flicker and persistent ghosts).
-Hands may pass through each other: closer than real hands only makes the task harder.
+Each hand is a synthetic hand of its own size, corrupted as one-hand synthetic takes are
+(:func:`.generate.synthesize`: camera occlusion, gaps, noise, merges, ghosts); the right hand is
+then carried along the left one's path by an interaction schedule (apart, touching, clapping,
+interlaced, crossing over), and markers of a hand buried in the other are hidden. Hands may pass
+through each other: closer than real hands only makes the task harder.
 
 Truth labels: ``0 .. M-1`` the left hand's markers, ``M .. 2M-1`` the right hand's.
 """
@@ -23,7 +22,7 @@ import numpy as np
 from ..formats.c3d import write_c3d
 from ..hands import HandNaming
 from ..layout import Layout
-from .generate import EMPTY, GHOST, SynthTake, TakeCorruption, clean_config, corrupt_take, synthesize, write_truth
+from .generate import EMPTY, GHOST, SynthConfig, SynthTake, synthesize, write_truth
 
 #: What the hands do in each phase of the schedule.
 PHASES = ("apart", "touch", "clap", "interlace", "cross")
@@ -41,7 +40,8 @@ class TwoHandConfig:
         close_share: share of the phases in which the hands are close (touch, clap, interlace, cross).
         bury: a marker nearer than this to a marker of the other hand, while the hands are close,
             is hidden (the other hand covers it) with probability ``bury_share``.
-        corruption: gaps, fragments, swaps and ghosts as in the temporal benchmark's raw takes.
+        synth: each hand's generator settings (default: :class:`.generate.SynthConfig`, the
+            realistic corruption of one-hand synthetic takes).
     """
 
     apart: tuple[float, float] = (0.2, 0.4)
@@ -50,34 +50,44 @@ class TwoHandConfig:
     close_share: float = 0.5
     bury: float = 0.02
     bury_share: float = 0.7
-    corruption: TakeCorruption | None = None
+    synth: SynthConfig | None = None
 
 
 def synthesize_two_hands(layout: Layout, frames: int, seed: int = 0, config: TwoHandConfig | None = None,
-                         rate: float = 120.0) -> tuple[SynthTake, SynthTake, np.ndarray, np.ndarray, list]:
-    """Two interacting hands of independent sizes, clean (see :func:`two_hand_take` for a raw take).
+                         rate: float = 120.0) -> tuple[SynthTake, SynthTake, np.ndarray, list]:
+    """Two interacting hands of independent sizes, each corrupted as :func:`.generate.synthesize`
+    corrupts one hand (camera occlusion, gaps, noise, merges, ghosts), then the right one carried
+    along the left one's path by the schedule; markers buried in the other hand are hidden.
 
     Returns:
-        ``(left, right, a, b, phases)``: the two clean synthetic hands, their markers ``(F, M, 3)``
-        in the shared world frame (the right hand moved by the schedule; NaN where buried in the
-        other hand) and the schedule's phases ``(start, stop, kind)``.
+        ``(left, right, offset, phases)``: the two synthetic hands in the shared world frame (the
+        right one's take and markers moved, buried samples removed from both takes), the right
+        hand's per-frame shift ``(F, 3)`` and the schedule's phases ``(start, stop, kind)``.
     """
     cfg = config or TwoHandConfig()
     rng = np.random.default_rng([seed, 22])
-    base = replace(clean_config(), rate=rate)
+    base = replace(cfg.synth or SynthConfig(), rate=rate)
     left = synthesize(layout, frames, seed=2 * seed + 1, config=replace(base, side="left"))
     right = synthesize(layout, frames, seed=2 * seed + 2, config=replace(base, side="right"))
-    a, b = left.markers.copy(), right.markers.copy()
     # The schedule: per phase, the right hand's centre relative to the left one's.
     offset, phases = _schedule(rng, frames, rate, cfg)
-    ca, cb = a.mean(axis=1), b.mean(axis=1)
-    b += (ca + offset - cb)[:, None, :]
+    shift = left.markers.mean(axis=1) + offset - right.markers.mean(axis=1)
+    right.markers = right.markers + shift[:, None, :]
+    right.take = replace(right.take, positions=(right.take.positions + shift[:, None, :]).astype(np.float32))
     # Markers buried in the other hand while the hands are close.
+    a, b = left.markers, right.markers
     d = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=3)
-    hide_a = (d.min(axis=2) < cfg.bury) & (rng.random(a.shape[:2]) < cfg.bury_share)
-    hide_b = (d.min(axis=1) < cfg.bury) & (rng.random(b.shape[:2]) < cfg.bury_share)
-    a[hide_a], b[hide_b] = np.nan, np.nan
-    return left, right, a, b, phases
+    buried = [(d.min(axis=2) < cfg.bury) & (rng.random(a.shape[:2]) < cfg.bury_share),
+              (d.min(axis=1) < cfg.bury) & (rng.random(b.shape[:2]) < cfg.bury_share)]
+    for hand, hide in zip((left, right), buried):
+        f, k = np.nonzero(hand.labels >= 0)
+        gone = hide[f, hand.labels[f, k]]
+        positions = hand.take.positions.copy()
+        positions[f[gone], k[gone]] = np.nan
+        hand.labels = hand.labels.copy()
+        hand.labels[f[gone], k[gone]] = EMPTY
+        hand.take = replace(hand.take, positions=positions)
+    return left, right, shift, phases
 
 
 def _schedule(rng: np.random.Generator, frames: int, rate: float,
@@ -123,7 +133,7 @@ class TwoHandTake:
     Attributes:
         take: the unlabeled take (``*N`` slots, metres).
         labels: int16 ``(F, S)``: ``0 .. M-1`` left hand, ``M .. 2M-1`` right hand, ghost -1, empty -2.
-        markers: ``(F, 2M, 3)`` true marker positions (NaN where buried), left hand first.
+        markers: ``(F, 2M, 3)`` true marker positions, left hand first.
         sides: ``["left", "right"]``; hands: the two :class:`.generate.SynthTake` they were made from.
         phases: ``(start, stop, kind)`` of the interaction schedule.
         gap: ``(F,)`` metres: the distance between the nearest markers of the two hands.
@@ -145,14 +155,17 @@ class TwoHandTake:
 def two_hand_take(layout: Layout, frames: int, seed: int = 0, config: TwoHandConfig | None = None,
                   rate: float = 120.0) -> TwoHandTake:
     """A raw take of two interacting hands (see the module's docstring); deterministic in ``seed``."""
-    cfg = config or TwoHandConfig()
-    left, right, a, b, phases = synthesize_two_hands(layout, frames, seed, cfg, rate)
-    markers = np.concatenate([a, b], axis=1)
-    take, truth, _ = corrupt_take(markers, rate, seed, cfg.corruption)
-    d = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=3)
-    gap = np.nanmin(np.where(np.isfinite(d), d, np.inf).reshape(frames, -1), axis=1)
-    return TwoHandTake(replace(take, vendor="mocap_autolabel synth (two hands)"), truth, markers, (left, right),
-                       phases, gap, seed)
+    left, right, _, phases = synthesize_two_hands(layout, frames, seed, config, rate)
+    m = len(layout)
+    positions = np.concatenate([left.take.positions, right.take.positions], axis=1)
+    labels = np.concatenate([left.labels, np.where(right.labels >= 0, right.labels + m, right.labels)], axis=1)
+    keep = np.isfinite(positions).all(axis=2).any(axis=0)  # slots emptied by burying go
+    positions, labels = positions[:, keep], labels[:, keep].astype(np.int16)
+    take = replace(left.take, positions=positions, names=[f"*{i}" for i in range(positions.shape[1])],
+                   vendor="mocap_autolabel synth (two hands)")
+    a, b = left.markers, right.markers
+    d = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=3).reshape(frames, -1)
+    return TwoHandTake(take, labels, np.concatenate([a, b], axis=1), (left, right), phases, d.min(axis=1), seed)
 
 
 def save_two_hands(two: TwoHandTake, path: str | os.PathLike, config: TwoHandConfig | None = None) -> tuple[str, str]:
