@@ -173,7 +173,9 @@ def _hand_order(sides: Sequence[str]) -> list[int]:
 
 def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = None) -> np.ndarray | None:
     """bool ``(P,)``: slots the file already names that are no marker of ``layout`` (in any side's
-    naming): a labeled body or prop, kept out of the hands. None where there are none."""
+    naming): a labeled body or prop, kept out of the hands. None where there are none, or where
+    keeping them out would leave under half the layout's markers in the median frame (then the
+    names are another labeling of the hand, and everything is relabeled)."""
     from .hands import NAMINGS, SIDES
 
     own = set(layout.names)
@@ -181,7 +183,14 @@ def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = N
         for side in SIDES:
             own.update(conv.names(side, layout))
     out = np.array([not _unnamed(n) and n not in own for n in take.names], dtype=bool)
-    return out if out.any() else None
+    if not out.any():
+        return None
+    # Named points are a body around the hand only where the hand is left to label: a file whose
+    # every point has a name of its own (a hand labeled with another layout's names) is relabeled.
+    offered = take.valid[:, ~out].sum(axis=1)
+    if np.median(offered[take.valid.any(axis=1)]) < len(layout) / 2:
+        return None
+    return out
 
 
 def _unnamed(name: str) -> bool:
