@@ -4,8 +4,8 @@ each other, with truth that records each sample's hand.
 Each hand is a synthetic hand of its own size, corrupted as one-hand synthetic takes are
 (:func:`.generate.synthesize`: camera occlusion, gaps, noise, merges, ghosts); the right hand is
 then carried along the left one's path by an interaction schedule (apart, touching, clapping,
-interlaced, crossing over), and markers of a hand buried in the other are hidden. Hands may pass
-through each other: closer than real hands only makes the task harder.
+interlaced, crossing over), placed beside it (the nearest markers of the two hands 4-40 mm apart
+while close, never through each other), and markers of a hand buried in the other are hidden.
 
 Truth labels: ``0 .. M-1`` the left hand's markers, ``M .. 2M-1`` the right hand's.
 """
@@ -34,8 +34,10 @@ class TwoHandConfig:
 
     Attributes:
         apart: distance between the hands' centres while apart, drawn per phase from this range.
-        close: distance between the centres while touching, clapping or interlaced (the nearest
-            markers of the two hands then lie within a few centimetres).
+        close: distance between the two hands' nearest markers while touching, clapping,
+            interlaced or crossing over, drawn per phase from this range (interlaced: half of it).
+            The hands are placed side by side along the phase's direction at this distance,
+            never through each other.
         phase_s: length of a phase, drawn from this range; phases ease into each other over 0.3 s.
         close_share: share of the phases in which the hands are close (touch, clap, interlace, cross).
         bury: a marker nearer than this to a marker of the other hand, while the hands are close,
@@ -45,7 +47,7 @@ class TwoHandConfig:
     """
 
     apart: tuple[float, float] = (0.2, 0.4)
-    close: tuple[float, float] = (0.07, 0.12)
+    close: tuple[float, float] = (0.008, 0.04)
     phase_s: tuple[float, float] = (0.8, 2.5)
     close_share: float = 0.5
     bury: float = 0.02
@@ -69,9 +71,9 @@ def synthesize_two_hands(layout: Layout, frames: int, seed: int = 0, config: Two
     base = replace(cfg.synth or SynthConfig(), rate=rate)
     left = synthesize(layout, frames, seed=2 * seed + 1, config=replace(base, side="left"))
     right = synthesize(layout, frames, seed=2 * seed + 2, config=replace(base, side="right"))
-    # The schedule: per phase, the right hand's centre relative to the left one's.
-    offset, phases = _schedule(rng, frames, rate, cfg)
-    shift = left.markers.mean(axis=1) + offset - right.markers.mean(axis=1)
+    # The schedule: per phase, where the right hand is relative to the left one.
+    direction, centres, nearest, phases = _schedule(rng, frames, rate, cfg)
+    shift = _place(left.markers, right.markers, direction, centres, nearest, rate)
     right.markers = right.markers + shift[:, None, :]
     right.take = replace(right.take, positions=(right.take.positions + shift[:, None, :]).astype(np.float32))
     # Markers buried in the other hand while the hands are close.
@@ -91,39 +93,56 @@ def synthesize_two_hands(layout: Layout, frames: int, seed: int = 0, config: Two
 
 
 def _schedule(rng: np.random.Generator, frames: int, rate: float,
-              cfg: TwoHandConfig) -> tuple[np.ndarray, list[tuple[int, int, str]]]:
-    """``(F, 3)`` offset of the right hand's centre from the left one's, and the phases
-    ``(start, stop, kind)``."""
-    targets, phases, t = [], [], 0
+              cfg: TwoHandConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[int, int, str]]]:
+    """Per frame: the direction ``(F, 3)`` from the left hand's centre to the right one's, the
+    centres' distance ``(F,)`` (NaN where the hands are close) and the nearest markers' distance
+    ``(F,)`` (NaN where apart); and the phases ``(start, stop, kind)``."""
+    direction = np.zeros((frames, 3))
+    centres, nearest = np.full(frames, np.nan), np.full(frames, np.nan)
+    phases, t = [], 0
     while t < frames:
-        length = max(2, int(rng.uniform(*cfg.phase_s) * rate))
+        stop = min(frames, t + max(2, int(rng.uniform(*cfg.phase_s) * rate)))
         kind = "apart" if rng.random() >= cfg.close_share else str(rng.choice(PHASES[1:]))
-        direction = rng.normal(size=3)
-        direction[2] *= 0.3  # mostly side by side, as hands are held
-        direction /= np.linalg.norm(direction)
-        if kind == "apart":
-            start = end = direction * rng.uniform(*cfg.apart)
-            if direction[0] < 0:  # the right hand stays to the right while apart
-                start = end = start * np.array([-1.0, 1.0, 1.0])
-        elif kind == "cross":  # from one side to the other, passing close
-            start = np.array([rng.uniform(*cfg.apart), 0.0, 0.0])
-            end = -start
-            start[1] = end[1] = rng.uniform(*cfg.close) * rng.choice([-1, 1])
-        else:  # touch, clap, interlace: close together, a little motion
-            dist = rng.uniform(*cfg.close) * (0.6 if kind == "interlace" else 1.0)
-            start = direction * dist
-            end = start + rng.normal(0.0, 0.01, size=3)
-        stop = min(frames, t + length)
+        u = rng.normal(size=3)
+        u[2] *= 0.3  # mostly side by side, as hands are held
+        u[0] = abs(u[0]) + 0.5  # the right hand starts on the right
+        u /= np.linalg.norm(u)
         w = np.linspace(0.0, 1.0, stop - t)[:, None]
-        targets.append(start * (1 - w) + end * w)
+        if kind == "cross":  # from one side over to the other, around the left hand
+            over = np.array([0.0, 0.0, 1.0])
+            angle = np.pi * w
+            direction[t:stop] = np.cos(angle) * u + np.sin(angle) * over
+        else:
+            direction[t:stop] = u
+        if kind == "apart":
+            centres[t:stop] = rng.uniform(*cfg.apart)
+        else:
+            nearest[t:stop] = rng.uniform(*cfg.close) * (0.5 if kind == "interlace" else 1.0)
         phases.append((t, stop, kind))
         t = stop
-    offset = np.concatenate(targets)[:frames]
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    return direction, centres, nearest, phases
+
+
+def _place(a: np.ndarray, b: np.ndarray, direction: np.ndarray, centres: np.ndarray, nearest: np.ndarray,
+           rate: float) -> np.ndarray:
+    """The shift ``(F, 3)`` that puts hand ``b`` (F, M, 3) along ``direction`` from hand ``a``'s
+    centre: at ``centres`` between the centres, or where the nearest markers are ``nearest`` apart
+    (bisection on the distance along the direction), eased over 0.3 s between phases."""
+    ca, cb = a.mean(axis=1), b.mean(axis=1)
+    lo, hi = np.zeros(len(a)), np.full(len(a), 0.6)
+    close = np.isfinite(nearest)
+    for _ in range(24):
+        mid = 0.5 * (lo + hi)
+        moved = b - cb[:, None] + (ca + mid[:, None] * direction)[:, None]
+        gap = np.linalg.norm(a[:, :, None] - moved[:, None], axis=3).reshape(len(a), -1).min(axis=1)
+        short = gap < np.where(close, nearest, 0.0)
+        lo, hi = np.where(short, mid, lo), np.where(short, hi, mid)
+    distance = np.where(close, hi, centres)
     ease = max(1, int(0.3 * rate))
-    kernel = np.ones(ease) / ease
-    smooth = np.stack([np.convolve(np.pad(offset[:, k], (ease // 2, ease - 1 - ease // 2), mode="edge"), kernel,
-                                   mode="valid") for k in range(3)], axis=1)
-    return smooth, phases
+    padded = np.pad(distance, (ease // 2, ease - 1 - ease // 2), mode="edge")
+    distance = np.maximum(np.convolve(padded, np.ones(ease) / ease, mode="valid"), distance * close)
+    return ca + distance[:, None] * direction - cb
 
 
 @dataclass
