@@ -177,6 +177,8 @@ def _hands_line(labeling, confident: float = 0.95) -> str | None:
     facts = labeling.info.get("hands", {})
     count = facts.get("count", 1)
     if count < 2 and "sides" not in facts:
+        if facts.get("warning"):
+            return f"1 hand\n  warning  {facts['warning']}"
         return "one hand of two forced was found" if facts.get("forced") == 2 else None
     parts = []
     for h, side in enumerate(facts.get("sides", [])):

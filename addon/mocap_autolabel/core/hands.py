@@ -51,6 +51,11 @@ PRESENT_FRAMES = 0.1
 #: are present (one hand's ghosts stay below: the 316 han2018 raw takes of the temporal benchmark
 #: reach at most 1.16 points per marker in their median frame).
 CROWDED = 1.35
+#: Metres between the nearest points of two hands that are apart: two hands come this far apart in
+#: at least :data:`PRESENT_FRAMES` of the frames where both are seen, one hand's points split in
+#: two hardly ever (synthetic han19 takes split for glove13, tips3: at most 4 % of frames; two
+#: interacting synthetic hands: 12-93 %). Force ``hands=2`` for hands that never let go.
+APART = 0.06
 #: Seconds a trajectory must stay nearer the other hand (by :data:`SWAP_MARGIN`) to be cut there.
 SWAP_SECONDS = 0.1
 SWAP_MARGIN = 0.04
@@ -175,6 +180,17 @@ def _track_centres(pos: np.ndarray, valid: np.ndarray, ids: np.ndarray, m: int,
     return centre, joined
 
 
+def _hand_gap(pos: np.ndarray, hand: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """Metres between the nearest points of hand 0 and hand 1 in each of ``frames``."""
+    out = np.full(len(frames), np.inf)
+    for a in range(0, len(frames), 1024):
+        f = frames[a:a + 1024]
+        d = np.linalg.norm(pos[f][:, :, None] - pos[f][:, None, :], axis=3)
+        cross = (hand[f][:, :, None] == 0) & (hand[f][:, None, :] == 1)
+        out[a:a + 1024] = np.where(cross, np.nan_to_num(d, nan=np.inf), np.inf).min(axis=(1, 2))
+    return out
+
+
 def _fill(centre: np.ndarray) -> np.ndarray:
     """``centre (F, 3)`` with its NaN frames filled by the nearest seen frame's value (all NaN stays)."""
     ok = np.isfinite(centre[:, 0])
@@ -263,13 +279,23 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
     both_present = present.all(axis=1)
     total = per_frame.sum(axis=1)[both_present]
     crowded = bool(len(total)) and float(np.median(total)) >= CROWDED * m
-    real = (share >= PRESENT_FRAMES) & crowded
+    # ... and come apart now and then: one hand's points split in two always touch.
+    sample_hand = np.full((frames, points), -1, dtype=np.int64)
+    sample_hand[f_idx, p_idx] = np.where(keep, own, -1)
+    gap = _hand_gap(pos, sample_hand, np.flatnonzero(both_present))
+    apart = bool(len(gap)) and float(np.mean(gap >= APART)) >= PRESENT_FRAMES
+    real = (share >= PRESENT_FRAMES) & crowded & (apart or hands == "2")
     info = {"present_share": [round(float(s), 4) for s in share],
             "median_points_both": float(np.median(total)) if len(total) else 0.0,
+            "apart_share": round(float(np.mean(gap >= APART)), 4) if len(gap) else 0.0,
             "median_markers": [int(np.median(per_frame[present[:, h], h])) if present[:, h].any() else 0
                                for h in range(2)]}
     if not real.all():
         one.info.update(info, count=1, **({"forced": 2} if hands == "2" else {}))
+        if crowded and (share >= PRESENT_FRAMES).all() and not apart:
+            one.info["warning"] = (f"the take holds {info['median_points_both']:.0f} points in a typical frame, "
+                                   f"{len(layout)} markers per hand, in two groups that never come "
+                                   f"{100 * APART:.0f} mm apart: labeled as one hand; if it holds two, use --hands 2")
         return one
     # Two hands: per sample, its tracklet's hand; offered to both where the tracklet is ambiguous.
     margin = np.abs(mean[:, 0] - mean[:, 1])
@@ -349,15 +375,19 @@ class SideEvidence:
 
 
 @functools.lru_cache(maxsize=16)
-def chiral_tetrahedron(layout: Layout, poses: int = 96, seed: int = 0) -> tuple[tuple[int, int, int, int], float]:
+def chiral_tetrahedron(layout: Layout, poses: int = 96,
+                       seed: int = 0) -> tuple[tuple[int, int, int, int], float] | None:
     """The four markers of ``layout`` whose signed volume keeps its sign best over random poses of
-    an average right hand (a mirror image flips it), and that sign's consistency in [0, 1]."""
+    an average right hand (a mirror image flips it), and that sign's consistency in [0, 1]; None
+    for a layout of fewer than four markers."""
     from itertools import combinations
 
     from .hand.ik import HandSolver
     from .hand.skeleton import N_DOF, HandModel
     from .synth.poses import sample_joint_angles
 
+    if len(layout) < 4:
+        return None
     hand = HandModel(side="right")
     pose = np.zeros((poses, N_DOF))
     pose[:, 6:] = sample_joint_angles(np.random.default_rng(seed), poses)
@@ -378,8 +408,10 @@ def side_evidence(observed: np.ndarray, layout: Layout) -> SideEvidence | None:
     """Handedness of ``observed (F, M, 3)`` labeled markers (metres, NaN where missing): the sign
     of :func:`chiral_tetrahedron`'s volume in every frame that sees its four markers; None where
     no frame does."""
-    quad, _ = chiral_tetrahedron(layout)
-    x = observed[:, list(quad)]
+    chiral = chiral_tetrahedron(layout)
+    if chiral is None:
+        return None
+    x = observed[:, list(chiral[0])]
     seen = np.isfinite(x).all(axis=(1, 2))
     if not seen.any():
         return None

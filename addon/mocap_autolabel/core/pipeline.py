@@ -238,7 +238,7 @@ def _name_hands(take: Take, layout: Layout, labeling: Labeling, found: Hands, si
 
     m = len(layout)
     facts = {key: found.info[key] for key in ("present_share", "median_markers", "forced", "both_tracklets",
-                                              "cuts") if key in found.info}
+                                              "cuts", "warning") if key in found.info}
     facts["count"] = found.count
     if found.count == 1 and naming is None and sides is None:
         labeling.info["hands"] = facts
@@ -439,6 +439,21 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     t = time.perf_counter()
     labeling = _name_hands(take, layout, labeling, found, sides, naming)
     times["sides"] = time.perf_counter() - t
+    if found.count == 2 and str(hands) == "auto" and not constraints:
+        # Two hands must explain the take better than one: a hand with more markers than the
+        # layout (a han19 glove labeled with glove13) also splits into two groups of points.
+        two = labeling.summary()["confident_share"]
+        if two < DOUBTFUL_SHARE:
+            say("checking against one hand")
+            single = label_take(take, layout, method, temporal, model=model, score=score, p=p, q=q, n_best=n_best,
+                                split_swaps=split_swaps, labeler=labeler, calibrate=calibrate, splits=splits,
+                                null_prior=null_prior, switch_cost=switch_cost, partner=partner,
+                                continuity=continuity, hands=1, naming=naming, keep_named=keep_named)
+            one = single.summary()["confident_share"]
+            if two < one + CLEARLY_BETTER / 3:
+                single.info["hands"].update(two_hands_rejected={"two": round(two, 4), "one": round(one, 4)})
+                single.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
+                return single
     times["total"] = time.perf_counter() - t0
     info["seconds"] = {key: round(v, 4) for key, v in times.items()}
     return labeling
