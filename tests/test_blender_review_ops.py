@@ -288,9 +288,11 @@ def test_shortcuts_for_the_edits_register_unregister_and_are_free(bpy_module):
                 if i.idname.startswith("mocap_autolabel.")}
 
     assert {(op, key, True, True, False) for op, key in EDIT_KEYS.items()} <= ours()
+    ui = ("MOCAPAL_PT_corrections", "MOCAPAL_UL_corrections", "MOCAPAL_PG_correction")
+    assert all(hasattr(bpy.types, n) for n in ui)
     addon_utils.disable("mocap_autolabel", default_set=True)
     try:
-        assert not ours()
+        assert not ours() and not any(hasattr(bpy.types, n) for n in ui)
     finally:
         addon_utils.enable("mocap_autolabel", default_set=True)
     assert len(ours()) == len(EDIT_KEYS) + 2  # no duplicates after a second registration
