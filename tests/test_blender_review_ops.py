@@ -288,7 +288,7 @@ def test_shortcuts_for_the_edits_register_unregister_and_are_free(bpy_module):
                 if i.idname.startswith("mocap_autolabel.")}
 
     assert {(op, key, True, True, False) for op, key in EDIT_KEYS.items()} <= ours()
-    ui = ("MOCAPAL_PT_corrections", "MOCAPAL_UL_corrections", "MOCAPAL_PG_correction")
+    ui = ("MOCAPAL_PT_corrections", "MOCAPAL_UL_corrections")
     assert all(hasattr(bpy.types, n) for n in ui)
     addon_utils.disable("mocap_autolabel", default_set=True)
     try:
