@@ -265,8 +265,10 @@ def test_the_label_operators_own_properties_win_over_the_panels(labeled):
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     doubt = state(coll).labeling.info["layout_doubt"]
     assert doubt["better"] == "han19"
-    assert bpy.ops.mocap_autolabel.label(layout=doubt["better"]) == {"FINISHED"}
+    # (the button: ui/panels.py, MOCAPAL_PT_review)
+    assert bpy.ops.mocap_autolabel.label(layout=doubt["better"], use_as_panel_layout=True) == {"FINISHED"}
     assert state(coll).layout == "han19" and "layout_doubt" not in state(coll).labeling.info
+    assert settings.layout == "han19"  # the panel now says what the take is labeled with
 
 
 # --- the missing pieces: shortcuts, selection after Assign, messages, progress ------------------

@@ -168,7 +168,8 @@ def refresh_corrections(scene: bpy.types.Scene, take_coll: bpy.types.Collection,
 
     settings = scene.mocap_autolabel
     review = load_state(take_coll).review
-    names = trajectory_names(take_coll)
+    # Only a take with corrections needs its point names (reading them back from the scene costs).
+    names = trajectory_names(take_coll) if review.constraints or review.splits else []
     first = first_frame(take_coll)
     items = settings.corrections
     items.clear()

@@ -188,7 +188,10 @@ def _resolve(context, coll, review=None) -> str:
     if review is not None:
         request.review = review
     counts = finish_label(context.scene, coll, request, request.run())
-    return f"re-solved: {counts['labeled']} labeled and {counts['unlabeled']} unlabeled markers rewritten"
+    from ..core.review import plural
+
+    n = counts["labeled"] + counts["unlabeled"]
+    return f"re-solved: {plural(n, 'marker')} rewritten ({counts['labeled']} labeled, {counts['unlabeled']} unlabeled)"
 
 
 class MOCAPAL_OT_label(bpy.types.Operator):
@@ -205,6 +208,9 @@ class MOCAPAL_OT_label(bpy.types.Operator):
                                 description="A layout .toml instead of a built-in layout")
     method: EnumProperty(name="Method", items=_methods, description="Per-frame labeler")
     temporal: EnumProperty(name="Temporal", items=TEMPORAL_ITEMS)
+    use_as_panel_layout: BoolProperty(name="Keep as the Panel's Layout", default=False, options={"SKIP_SAVE"},
+                                      description="Also put this layout in the panel's Layout field (the "
+                                                  "Review panel's 'Label as' button does)")
 
     #: The settings the operator shares with the panel: given to the operator (from Python, a
     #: button, or the redo panel), they win; not given, the panel's are used.
@@ -253,6 +259,9 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         except ValueError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        settings = context.scene.mocap_autolabel
+        if self.use_as_panel_layout and request.layout_ref in {name for name, *_ in _layouts(None, context)}:
+            settings.layout, settings.layout_file = request.layout_ref, ""
         s = summary(labeling, context.scene.mocap_autolabel.sure)
         if request.dropped:
             self.report({"WARNING"}, self._dropped_message(coll, request))

@@ -65,8 +65,10 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         if not has_review(settings.take):
             layout.label(text="Label a take to review it", icon="INFO")
             return
-        s = summary(load_state(settings.take).labeling, settings.sure)
+        state = load_state(settings.take)
+        s = summary(state.labeling, settings.sure)
         box = layout.box()
+        box.label(text=f"{settings.take.name}: {state.layout}, {state.method}, {state.temporal}")
         box.label(text=f"Labels present: {s['labels']}")
         box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
         box.label(text=f"Uncertain segments: {s['uncertain']}   Locked: {s['locked']}")
@@ -78,6 +80,7 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
             col.label(text=f"{d.layout}: {100 * d.share:.0f} % confident")
             op = col.operator("mocap_autolabel.label", text=f"Label as {d.better}", icon="FILE_REFRESH")
             op.layout = d.better  # the operator's own layout wins over the panel's
+            op.use_as_panel_layout = True
         row = layout.row(align=True)
         row.operator("mocap_autolabel.next_uncertain", text="Previous", icon="TRIA_LEFT").previous = True
         row.operator("mocap_autolabel.next_uncertain", text="Next", icon="TRIA_RIGHT").previous = False
