@@ -183,13 +183,12 @@ def _shown_as(labeling, slot: int, index: int, names: list[str]) -> str:
 def _resolve(context, coll, review=None) -> str:
     """Label the take again with its corrections (or with ``review`` instead, e.g. one less)."""
     from ..blender.review import finish_label, prepare_label
+    from ..core.review import plural
 
     request = prepare_label(coll)
     if review is not None:
         request.review = review
     counts = finish_label(context.scene, coll, request, request.run())
-    from ..core.review import plural
-
     n = counts["labeled"] + counts["unlabeled"]
     return f"re-solved: {plural(n, 'marker')} rewritten ({counts['labeled']} labeled, {counts['unlabeled']} unlabeled)"
 
