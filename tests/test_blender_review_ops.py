@@ -123,6 +123,32 @@ def test_label_acts_on_the_panels_take_and_never_drops_corrections_silently(labe
     assert (per[per != EMPTY] == NULL).all()
 
 
+def test_the_issue_scenario_on_the_real_glove_recording(empty_scene, bpy_module, tmp_path):
+    """Issue 33, bug 1 as found: the demo take labeled with 2 corrections, then the real glove
+    recording imported and labeled with glove13 from the panel: the glove is labeled, the demo keeps
+    its labels and corrections, and the panel stays on the glove."""
+    from conftest import data_path
+
+    glove_file = data_path("hands", "qualisys_glove13", "recording_part1.tsv")
+    bpy = bpy_module
+    demo = _import(bpy, DEMO, tmp_path)
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    thumb = demo["mocap_labeled"].objects["ThumbTip"]
+    for frame, op in ((900, bpy.ops.mocap_autolabel.lock), (100, bpy.ops.mocap_autolabel.unlabel)):
+        bpy.context.scene.frame_set(frame)
+        _select(bpy, thumb)
+        assert op() == {"FINISHED"}
+    before = state(demo)
+    glove = _import(bpy, glove_file, tmp_path)
+    settings = bpy.context.scene.mocap_autolabel
+    settings.layout = "glove13"
+    _select(bpy, thumb)  # the demo's marker still active, as in the report
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    assert settings.take == glove and state(glove).layout == "glove13"
+    after = state(demo)
+    assert after.layout == "han19" and after.review.constraints == before.review.constraints
+
+
 # --- bug 5: Previous / Next reach every uncertain segment ------------------------------------
 
 def _walk(bpy, previous):
@@ -218,6 +244,16 @@ def test_overriding_a_lock_warns_and_corrections_can_be_listed_unlocked_and_dele
     assert bpy.ops.mocap_autolabel.delete_correction() == {"FINISHED"}
     after = state(coll)
     assert after.review.constraints == [] and not after.labeling.locked.any() and len(settings.corrections) == 0
+    # A split is a correction too: listed after the decisions, deleted the same way.
+    lab = after.labeling
+    seg = _long_segment(lab, thumb)
+    scene.frame_set(int(lab.start[seg]) + 5 + 1)
+    _select(bpy, labeled_objects(coll)[thumb])
+    assert bpy.ops.mocap_autolabel.split() == {"FINISHED"}
+    assert [c.kind for c in settings.corrections] == ["split"]
+    assert settings.corrections[0].text == f"split *{lab.slot[seg]} at frame {int(lab.start[seg]) + 6}"
+    assert bpy.ops.mocap_autolabel.delete_correction(index=0) == {"FINISHED"}
+    assert state(coll).review.splits == [] and len(settings.corrections) == 0
     # Nothing to unlock: a clear error naming the marker and the frame.
     _select(bpy, labeled_objects(coll)[thumb])
     scene.frame_set(late + 1)
