@@ -283,6 +283,13 @@ def test_the_take_field_holds_only_imported_takes(labeled):
     _select(bpy)
     with pytest.raises(RuntimeError, match="Import a take first"):
         bpy.ops.mocap_autolabel.label()
+    # Written past the field's checks (raw storage, or a file from before them): the operators refuse it.
+    settings["take"] = other
+    _select(bpy, labeled_objects(coll)[0])
+    for op in (bpy.ops.mocap_autolabel.label, bpy.ops.mocap_autolabel.resolve,
+               bpy.ops.mocap_autolabel.next_uncertain):
+        with pytest.raises(RuntimeError, match="'Props' is not an imported take"):
+            op()
 
 
 # --- bug 9: the Label operator's own properties win -------------------------------------------

@@ -131,8 +131,8 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     corrections_index: IntProperty(name="Correction", default=-1)
     # Where Previous / Next stand: the slot and Blender frame of the segment they last went to
     # (several segments can start on one frame; the frame alone cannot say which one is current).
-    walk_slot: IntProperty(default=-1, options={"HIDDEN", "SKIP_SAVE"})
-    walk_frame: IntProperty(default=0, options={"HIDDEN", "SKIP_SAVE"})
+    walk_slot: IntProperty(default=-1, options={"HIDDEN"})
+    walk_frame: IntProperty(default=0, options={"HIDDEN"})
 
 
 def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling) -> None:
