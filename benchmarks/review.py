@@ -94,7 +94,19 @@ def main() -> None:
             ghost = next(o for o in coll["mocap_unlabeled"].objects if o["mocap_null"] == slot)
             select(ghost)
             note("assign (a ghost gets a label)", timed(bpy.ops.mocap_autolabel.assign_label, label=str(a)))
+            assigned_at = scene.frame_current
             note("re-solve (scores remembered)", timed(bpy.ops.mocap_autolabel.resolve))
+            settings = scene.mocap_autolabel
+            for sure in (0.9, 0.999, 0.95):  # the list, the counts and the key colours follow
+                start = time.perf_counter()
+                settings.sure = sure
+                note(f"Confident at -> {sure} (list + key colours)", time.perf_counter() - start)
+            scene.frame_set(coll["mocap_first"])
+            note("next uncertain", timed(bpy.ops.mocap_autolabel.next_uncertain))
+            scene.frame_set(assigned_at)
+            select(ghost)
+            note("unlock (deletes the assign, re-solves)", timed(bpy.ops.mocap_autolabel.unlock))
+            note("delete correction (re-solves)", timed(bpy.ops.mocap_autolabel.delete_correction, index=0))
             blend = os.path.join(tmp, "review.blend")
             note("save .blend", timed(bpy.ops.wm.save_as_mainfile, filepath=blend))
             note("open .blend", timed(bpy.ops.wm.open_mainfile, filepath=blend))

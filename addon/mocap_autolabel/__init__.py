@@ -7,9 +7,15 @@ register/unregister, so the core and the CLI work without Blender.
 
 __version__ = "0.1.0"
 
-#: Shortcuts of the review, in the Frames keymap (every editor): (operator, key, properties).
+#: Shortcuts of the review, all Shift+Alt+key in the Frames keymap (every editor: the viewport, the
+#: Dope Sheet, the Graph Editor, the Timeline): (operator, key, properties). Blender's default
+#: keymap binds none of these in those editors' Object-mode and animation keymaps (a test checks).
 SHORTCUTS = (("mocap_autolabel.next_uncertain", "RIGHT_ARROW", {"previous": False}),
-             ("mocap_autolabel.next_uncertain", "LEFT_ARROW", {"previous": True}))
+             ("mocap_autolabel.next_uncertain", "LEFT_ARROW", {"previous": True}),
+             ("mocap_autolabel.assign_label", "A", {}),
+             ("mocap_autolabel.swap_labels", "S", {}),
+             ("mocap_autolabel.unlabel", "U", {}),
+             ("mocap_autolabel.lock", "L", {}))
 _keymap_items: list = []
 
 

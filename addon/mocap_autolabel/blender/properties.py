@@ -1,7 +1,9 @@
-"""Settings of the review in the scene (``scene.mocap_autolabel``) and its uncertain-segment list.
+"""Settings of the review in the scene (``scene.mocap_autolabel``), its uncertain-segment list and
+its list of corrections.
 
-The list is derived from the take's stored labeling (``review.py``) and rebuilt after every
-change; it lives in the scene so that the panel's UIList can show it and undo restores it.
+The lists are derived from the take's stored labeling and review (``review.py``) and rebuilt
+after every change (and when Confident at changes); they live in the scene so that the panel's
+UILists can show them and undo restores them.
 """
 
 from __future__ import annotations
@@ -49,13 +51,39 @@ def _jump(self, context):
         bpy.ops.mocap_autolabel.jump_to_segment(index=self.uncertain_index)
 
 
+def is_take(_self, coll) -> bool:
+    """Poll of the Take field: only collections the importer made (not their Raw, Labeled or
+    Unlabeled children, nor any other collection) are offered."""
+    return coll is not None and "mocap_source" in coll
+
+
 def _take_changed(self, context):
     from . import review
 
-    if self.take is not None and review.has_review(self.take):
-        refresh_uncertain(self.id_data, self.take, review.load_state(self.take).labeling)
+    coll = self.take
+    if coll is not None and not is_take(self, coll):
+        # The field only offers takes, but Python can assign anything: a take's own child collection
+        # stands for its take, any other collection for none (labeling it would build a take inside it).
+        self.take = review.take_collection(coll)  # calls this update again
+        return
+    self["walk_slot"] = -1
+    if coll is not None and review.has_review(coll):
+        review.recolor(self.id_data, coll)
+        refresh_uncertain(self.id_data, coll, review.load_state(coll).labeling)
     else:
         self.uncertain.clear()
+        self.corrections.clear()
+        self.uncertain_total = 0
+
+
+def _sure_changed(self, context):
+    """Confident at moved: the list, the counts, the walk and the key colours follow it."""
+    from . import review
+
+    coll = self.take
+    if coll is not None and review.has_review(coll):
+        review.recolor(self.id_data, coll)
+        refresh_uncertain(self.id_data, coll, review.load_state(coll).labeling)
 
 
 class MOCAPAL_PG_uncertain(bpy.types.PropertyGroup):
@@ -68,8 +96,18 @@ class MOCAPAL_PG_uncertain(bpy.types.PropertyGroup):
     confidence: FloatProperty(name="Confidence", subtype="FACTOR", min=0.0, max=1.0)
 
 
+class MOCAPAL_PG_correction(bpy.types.PropertyGroup):
+    """One correction of the take (a locked decision or a split), as the Corrections list shows it."""
+
+    kind: StringProperty(name="Kind")  # "label", "ghost" or "split"
+    text: StringProperty(name="Correction")
+    slot: IntProperty(name="Slot")
+    frame_start: IntProperty(name="Start")
+    frame_end: IntProperty(name="End")
+
+
 class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
-    take: PointerProperty(type=bpy.types.Collection, name="Take", update=_take_changed,
+    take: PointerProperty(type=bpy.types.Collection, name="Take", update=_take_changed, poll=is_take,
                           description="The imported take to label and review")
     layout: EnumProperty(name="Layout", items=_layouts, default=LAYOUT_DEFAULT,
                          description="Marker layout to label with")
@@ -77,7 +115,7 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
                                 description="A layout .toml instead of a built-in layout")
     method: EnumProperty(name="Method", items=_methods, description="Per-frame labeler (set: ours, the default)")
     temporal: EnumProperty(name="Temporal", default="vote", items=TEMPORAL_ITEMS)
-    sure: FloatProperty(name="Confident at", default=SURE, min=0.5, max=1.0, subtype="FACTOR",
+    sure: FloatProperty(name="Confident at", default=SURE, min=0.5, max=1.0, subtype="FACTOR", update=_sure_changed,
                         description="Segments at or above this confidence need no review")
     auto_resolve: BoolProperty(name="Re-solve After Each Edit", default=False,
                                description="Run the labeling again with all corrections after every edit, so a "
@@ -89,10 +127,17 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     uncertain: CollectionProperty(type=MOCAPAL_PG_uncertain)
     uncertain_index: IntProperty(name="Uncertain Segment", default=-1, update=_jump)
     uncertain_total: IntProperty(name="Uncertain Segments")
+    corrections: CollectionProperty(type=MOCAPAL_PG_correction)
+    corrections_index: IntProperty(name="Correction", default=-1)
+    # Where Previous / Next stand: the slot and Blender frame of the segment they last went to
+    # (several segments can start on one frame; the frame alone cannot say which one is current).
+    walk_slot: IntProperty(default=-1, options={"HIDDEN"})
+    walk_frame: IntProperty(default=0, options={"HIDDEN"})
 
 
 def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling) -> None:
-    """Rebuild the scene's list of uncertain labeled segments (worst first) from a labeling."""
+    """Rebuild the scene's list of uncertain labeled segments (worst first) from a labeling, and the
+    list of the take's corrections."""
     from .review import first_frame
 
     settings = scene.mocap_autolabel
@@ -110,6 +155,36 @@ def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, l
     settings.uncertain_total = len(idx)
     # Writing the index directly would jump; the property's raw storage does not call the update.
     settings["uncertain_index"] = -1
+    refresh_corrections(scene, take_coll, labeling)
+
+
+def refresh_corrections(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling) -> None:
+    """Rebuild the scene's list of the take's corrections: its locked decisions in the order they
+    were made (the list index is the constraint's place, which Delete Correction takes), then its
+    splits."""
+    from ..core.labeling import NULL
+    from ..core.review import describe
+    from .review import first_frame, load_state, trajectory_names
+
+    settings = scene.mocap_autolabel
+    review = load_state(take_coll).review
+    # Only a take with corrections needs its point names (reading them back from the scene costs).
+    names = trajectory_names(take_coll) if review.constraints or review.splits else []
+    first = first_frame(take_coll)
+    items = settings.corrections
+    items.clear()
+    for c in review.constraints:
+        item = items.add()
+        item.kind = "ghost" if c.label == NULL else "label"
+        item.text = describe(c, labeling.names, names, first)
+        item.slot, item.frame_start, item.frame_end = c.slot, c.start + first, c.stop - 1 + first
+    for slot, frame in review.splits:
+        item = items.add()
+        item.kind = "split"
+        item.text = f"split {names[slot]} at frame {frame + first}"
+        item.slot, item.frame_start, item.frame_end = slot, frame + first, frame + first
+    if settings.corrections_index >= len(items):
+        settings.corrections_index = len(items) - 1
 
 
 @bpy.app.handlers.persistent
@@ -130,7 +205,7 @@ def on_load(*_args) -> None:
                 break
 
 
-classes = (MOCAPAL_PG_uncertain, MOCAPAL_PG_settings)
+classes = (MOCAPAL_PG_uncertain, MOCAPAL_PG_correction, MOCAPAL_PG_settings)
 
 
 def register() -> None:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import uuid
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import bpy
 import numpy as np
@@ -28,12 +28,14 @@ from ..core.layout import Layout, load_layout
 from ..core.review import (
     CLASS_NAMES,
     KEY_TYPES,
+    SURE,
     Review,
     changed_labels,
     labeling_from_arrays,
     labeling_to_arrays,
     marker_classes,
     null_classes,
+    remap_review,
     uncertain_segments,
 )
 from ..core.take import Take
@@ -216,12 +218,15 @@ def _hide_raw(take_coll: bpy.types.Collection) -> None:
 
 
 def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, labeling: Labeling,
-                   previous: Labeling | None = None) -> dict[str, int]:
+                   previous: Labeling | None = None, sure: float = SURE,
+                   previous_sure: float | None = None) -> dict[str, int]:
     """Show ``labeling`` in the scene; with ``previous``, rewrite only the markers that changed.
 
     Each labeled empty is keyed where its label has a sample; each key's type is its confidence
-    class (:data:`core.review.KEY_TYPES`). Slots with unassigned samples get an empty in
-    "Unlabeled", keyed the same way.
+    class (:data:`core.review.KEY_TYPES`) at the threshold ``sure`` (the panel's Confident at).
+    Slots with unassigned samples get an empty in "Unlabeled", keyed the same way. With
+    ``previous``, the keys show it at ``previous_sure`` (default: the threshold stored on the take
+    when they were written), so a new threshold rewrites exactly the markers it recolours.
 
     Returns:
         counts of rewritten labeled and unlabeled empties.
@@ -233,16 +238,19 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
     frames_all = np.arange(take.n_frames, dtype=np.float32) + first_frame(take_coll)
     types = key_type_values()
     per = labeling.per_sample()
-    classes = marker_classes(labeling)
+    classes = marker_classes(labeling, sure)
     m = len(layout)
     if previous is not None and (previous.names != labeling.names or previous.per_sample().shape != per.shape):
         previous = None
+    if previous_sure is None:
+        previous_sure = key_sure(take_coll)
+    take_coll["mocap_sure"] = float(sure)  # the threshold the keys' colours now show
 
     # Labeled markers: (F, M, 3) positions in layout order.
     f, s = np.nonzero(per >= 0)
     xyz = np.full((take.n_frames, m, 3), np.nan, dtype=np.float32)
     xyz[f, per[f, s]] = take.positions[f, s] * scale
-    todo = range(m) if previous is None else changed_labels(previous, labeling).tolist()
+    todo = range(m) if previous is None else changed_labels(previous, labeling, previous_sure, sure).tolist()
     objs = _labeled_objects(labeled)
     for label in todo:
         obj = objs.get(label)
@@ -259,11 +267,11 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
                 fc.group.color_set = FINGER_COLOR_SETS[finger]
 
     # Unlabeled samples, one empty per slot that has any.
-    null_class = null_classes(labeling)
+    null_class = null_classes(labeling, sure)
     if previous is None:
         slots = np.flatnonzero((null_class >= 0).any(axis=0))
     else:
-        slots = np.flatnonzero((null_classes(previous) != null_class).any(axis=0))
+        slots = np.flatnonzero((null_classes(previous, previous_sure) != null_class).any(axis=0))
     nulls = _null_objects(unlabeled)
     for slot in slots:
         valid = null_class[:, slot] >= 0
@@ -279,6 +287,29 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
     return {"labeled": len(todo), "unlabeled": len(slots)}
 
 
+def key_sure(take_coll: bpy.types.Collection) -> float:
+    """The confidence threshold the take's key colours show (the default before any was stored)."""
+    return float(take_coll.get("mocap_sure", SURE))
+
+
+def scene_sure(scene: bpy.types.Scene | None) -> float:
+    """The panel's Confident at (the default where the add-on is not registered: a CLI run)."""
+    settings = getattr(scene, "mocap_autolabel", None) if scene is not None else None
+    return float(settings.sure) if settings is not None else SURE
+
+
+def recolor(scene: bpy.types.Scene, take_coll: bpy.types.Collection) -> int:
+    """Rewrite the key types of the markers whose class changes at the scene's Confident at; returns
+    how many empties were rewritten (none when the keys already show that threshold)."""
+    sure = scene_sure(scene)
+    if not has_review(take_coll) or key_sure(take_coll) == sure:
+        return 0
+    state = load_state(take_coll)
+    counts = write_labeling(take_coll, current_take(take_coll), state_layout(state), state.labeling,
+                            state.labeling, sure)
+    return counts["labeled"] + counts["unlabeled"]
+
+
 def theme_color(finger: str) -> tuple[float, float, float]:
     """The RGB of a digit's colour set in the current theme."""
     index = int(FINGER_COLOR_SETS[finger][5:]) - 1
@@ -290,6 +321,12 @@ def theme_color(finger: str) -> tuple[float, float, float]:
 def sample_index(take_coll: bpy.types.Collection, frame: int) -> int:
     """The take's sample index (0-based) of a Blender frame."""
     return int(frame) - first_frame(take_coll)
+
+
+def trajectory_names(take_coll: bpy.types.Collection) -> list[str]:
+    """The name of every point slot as the reviewer knows it: the file's point name, ``*N`` where
+    the file named none (what messages and the Corrections list say instead of a slot number)."""
+    return list(current_take(take_coll).names)
 
 
 def slot_of(obj: bpy.types.Object, labeling: Labeling, index: int) -> int | None:
@@ -305,6 +342,12 @@ def slot_of(obj: bpy.types.Object, labeling: Labeling, index: int) -> int | None
             slot = int(obj[key])
             return slot if labeling.per_sample()[index, slot] != EMPTY else None
     return None
+
+
+def labeled_object(take_coll: bpy.types.Collection, label: int) -> bpy.types.Object | None:
+    """The empty of a layout label in the take's "Labeled" collection (or None)."""
+    coll = take_coll.get("mocap_labeled")
+    return _labeled_objects(coll).get(int(label)) if coll is not None and label >= 0 else None
 
 
 def object_for(take_coll: bpy.types.Collection, labeling: Labeling, segment: int) -> bpy.types.Object | None:
@@ -410,23 +453,44 @@ class LabelRequest:
     previous: Labeling | None
     labeler: object
     token: str = ""  # the stored state's token when the request was made
+    #: corrections of an earlier labeling with another layout that name a label this layout lacks
+    dropped: list = field(default_factory=list)
+    dropped_names: list = field(default_factory=list)  # the label names the dropped corrections use
+    #: the share of the run done (0-1), written by :meth:`run` as its stages start
+    done: float = 0.0
+    stage: str = ""
 
     def run(self, say=None, check_layout: bool = False) -> Labeling:
         """The labeling; with ``check_layout``, ``info["layout_doubt"]`` (a :class:`LayoutDoubt` as a
         dict) says when another layout fits the take clearly better (a re-solve keeps what the
-        labeling it replaces said)."""
+        labeling it replaces said).
+
+        ``say(message)`` hears each stage as it starts (``"scoring 1200 frames with set (stage 2 of
+        3)"``); :attr:`stage` holds that line and :attr:`done` the share of the work done before it
+        (:func:`core.review.stage_progress`).
+        """
         from ..core.pipeline import label_take, layout_doubt
+        from ..core.review import stage_progress
+
+        track = stage_progress(check_layout)
+
+        def staged(message: str) -> None:
+            self.stage, self.done = track(message)
+            if say is not None:
+                say(self.stage)  # a cancelled job raises here, between stages
 
         labeling = label_take(self.take, self.layout, method=self.method, temporal=self.temporal,
                               constraints=self.review.constraints, splits=self.review.splits,
-                              labeler=self.labeler, progress=say)
+                              labeler=self.labeler, progress=staged)
         if check_layout:
+            staged("checking the layout against the other built-in layouts")
             doubt = layout_doubt(self.take, self.layout, labeling)
             doubt = asdict(doubt) if doubt else None
         else:
             doubt = self.previous.info.get("layout_doubt") if self.previous is not None else None
         if doubt:
             labeling.info["layout_doubt"] = doubt
+        self.done = 1.0
         return labeling
 
 
@@ -434,8 +498,9 @@ def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None
                   temporal: str | None = None) -> LabelRequest:
     """A labeling run for the take; settings default to those it was labeled with before.
 
-    A take labeled before keeps its corrections when it is labeled again with the same layout;
-    with another layout they no longer mean anything and are dropped.
+    A take labeled before keeps its corrections when it is labeled again: with another layout,
+    those naming a marker the new layout also has (by name), ghost decisions and splits are kept,
+    and the others are listed in the request's ``dropped`` for the caller to report.
     """
     from ..core.labelers import make_labeler
     from .session import labeler
@@ -445,15 +510,18 @@ def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None
     method = method or (state.method if state else "set")
     temporal = temporal or (state.temporal if state else "vote")
     layout = load_layout(layout_ref)
-    keep = state is not None and state.layout == layout_ref
+    keep = state is not None and (state.layout == layout_ref or state.labeling.names == layout.names)
     review = state.review if keep else Review()
     previous = state.labeling if keep else None
+    dropped = []
+    if state is not None and not keep:
+        review, dropped = remap_review(state.review, state.labeling.names, layout.names)
     take = current_take(take_coll)
     lab = None
     if method in ("set", "perm", "cnn"):
         lab = labeler(take_coll, method, layout, lambda: make_labeler(method, layout))
     return LabelRequest(take_coll.name, take, layout, layout_ref, method, temporal, review, previous, lab,
-                        state.token if state else "")
+                        state.token if state else "", dropped, list(state.labeling.names) if state else [])
 
 
 def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, request: LabelRequest,
@@ -469,7 +537,8 @@ def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, reques
 
     if request.previous is None and has_review(take_coll):
         _clear_labels(take_coll)  # labeled before with another layout
-    counts = write_labeling(take_coll, request.take, request.layout, labeling, request.previous)
+    counts = write_labeling(take_coll, request.take, request.layout, labeling, request.previous,
+                            scene_sure(scene))
     commit(scene, take_coll, ReviewState(labeling, request.review, request.layout_ref, request.method,
                                          request.temporal))
     return counts
@@ -490,7 +559,8 @@ def commit(scene: bpy.types.Scene, take_coll: bpy.types.Collection, state: Revie
 
 def edit(scene: bpy.types.Scene, take_coll: bpy.types.Collection, state: ReviewState, labeling: Labeling) -> dict:
     """Show an edited labeling (rewriting only what changed) and store it."""
-    counts = write_labeling(take_coll, current_take(take_coll), state_layout(state), labeling, state.labeling)
+    counts = write_labeling(take_coll, current_take(take_coll), state_layout(state), labeling, state.labeling,
+                            scene_sure(scene))
     state.labeling = labeling
     commit(scene, take_coll, state)
     return counts

@@ -63,9 +63,23 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
                 continue
             collection = build_take(take, context.scene, options)
             context.scene.mocap_autolabel.take = collection  # the take the Mocap panel works on
+            _make_active(context, collection)
             for warning in take.warnings:
                 self.report({"WARNING"}, f"{os.path.basename(path)}: {warning}")
             self.report({"INFO"}, f"Imported {len(collection.objects)} markers x {take.n_frames} frames "
                                   f"from {os.path.basename(path)}")
             imported += 1
         return {"FINISHED"} if imported else {"CANCELLED"}
+
+
+def _make_active(context, collection) -> None:
+    """Select the new take's first marker alone and make it the active object, so that nothing that
+    follows the selection acts on a take imported before."""
+    context.view_layer.update()  # the new objects get their view-layer bases only at the next sync
+    objs = [o for o in collection.objects if o.name in context.view_layer.objects]
+    if not objs:
+        return
+    for other in context.selected_objects:
+        other.select_set(False)
+    objs[0].select_set(True)
+    context.view_layer.objects.active = objs[0]

@@ -10,14 +10,15 @@ import numpy as np
 _HANDLE: list = []  # the draw handler, removed on unregister
 
 
-def _classes(coll, state_token: str):
+def _classes(coll, state_token: str, sure: float):
     from ..blender.review import load_state
     from ..blender.session import session
     from ..core.review import marker_classes
 
     cache = session(coll)
-    if cache.classes is None or cache.classes[0] != state_token:
-        cache.classes = (state_token, marker_classes(load_state(coll).labeling))
+    key = f"{state_token}@{sure}"  # the rings follow Confident at, as the key colours do
+    if cache.classes is None or cache.classes[0] != key:
+        cache.classes = (key, marker_classes(load_state(coll).labeling, sure))
     return cache.classes[1]
 
 
@@ -47,7 +48,7 @@ def draw() -> None:
     try:
         meta = coll["mocap_settings"]
         layout = load_layout(str(meta["layout"]))
-        geo = overlay_geometry(coll, layout, _classes(coll, str(meta.get("token", ""))),
+        geo = overlay_geometry(coll, layout, _classes(coll, str(meta.get("token", "")), settings.sure),
                                sample_index(coll, scene.frame_current), settings.show_sticks)
     except Exception:  # a draw callback must never raise
         return

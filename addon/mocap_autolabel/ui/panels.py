@@ -28,6 +28,15 @@ class MOCAPAL_UL_uncertain(bpy.types.UIList):
         row.label(text=f"{item.confidence * 100:.0f} %")
 
 
+class MOCAPAL_UL_corrections(bpy.types.UIList):
+    """The take's corrections in the order they were made: what, on which trajectory, which frames."""
+
+    _ICONS = {"label": "LOCKED", "ghost": "GHOST_ENABLED", "split": "SCULPTMODE_HLT"}
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        layout.label(text=item.text, icon=self._ICONS.get(item.kind, "LOCKED"))
+
+
 class MOCAPAL_PT_label(_Sidebar, bpy.types.Panel):
     bl_label = "Label"
 
@@ -56,8 +65,10 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         if not has_review(settings.take):
             layout.label(text="Label a take to review it", icon="INFO")
             return
-        s = summary(load_state(settings.take).labeling, settings.sure)
+        state = load_state(settings.take)
+        s = summary(state.labeling, settings.sure)
         box = layout.box()
+        box.label(text=f"{settings.take.name}: {state.layout}, {state.method}, {state.temporal}")
         box.label(text=f"Labels present: {s['labels']}")
         box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
         box.label(text=f"Uncertain segments: {s['uncertain']}   Locked: {s['locked']}")
@@ -67,6 +78,9 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
             col.label(text=f"Is this a {d.better} take?", icon="ERROR")
             col.label(text=f"{d.better}: {100 * d.better_share:.0f} % confident")
             col.label(text=f"{d.layout}: {100 * d.share:.0f} % confident")
+            op = col.operator("mocap_autolabel.label", text=f"Label as {d.better}", icon="FILE_REFRESH")
+            op.layout = d.better  # the operator's own layout wins over the panel's
+            op.use_as_panel_layout = True
         row = layout.row(align=True)
         row.operator("mocap_autolabel.next_uncertain", text="Previous", icon="TRIA_LEFT").previous = True
         row.operator("mocap_autolabel.next_uncertain", text="Next", icon="TRIA_RIGHT").previous = False
@@ -74,6 +88,22 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         if settings.uncertain_total > len(settings.uncertain):
             layout.label(text=f"Showing the worst {len(settings.uncertain)} of {settings.uncertain_total}")
         layout.prop(settings, "sure", slider=True)
+
+
+class MOCAPAL_PT_corrections(_Sidebar, bpy.types.Panel):
+    bl_label = "Corrections"
+    bl_parent_id = "MOCAPAL_PT_review"
+
+    def draw(self, context):
+        settings = context.scene.mocap_autolabel
+        layout = self.layout
+        if not settings.corrections:
+            layout.label(text="No corrections yet")
+            return
+        row = layout.row()
+        row.template_list("MOCAPAL_UL_corrections", "", settings, "corrections", settings, "corrections_index",
+                          rows=4)
+        row.column(align=True).operator("mocap_autolabel.delete_correction", text="", icon="X")
 
 
 class MOCAPAL_PT_relabel(_Sidebar, bpy.types.Panel):
@@ -88,6 +118,7 @@ class MOCAPAL_PT_relabel(_Sidebar, bpy.types.Panel):
         col.operator("mocap_autolabel.unlabel", icon="GHOST_ENABLED")
         col.operator("mocap_autolabel.split", icon="SCULPTMODE_HLT")
         col.operator("mocap_autolabel.lock", icon="LOCKED")
+        col.operator("mocap_autolabel.unlock", icon="UNLOCKED")
         col.separator()
         col.prop(settings, "auto_resolve")
         col.operator("mocap_autolabel.resolve", icon="FILE_REFRESH")
@@ -117,4 +148,5 @@ class MOCAPAL_PT_legend(_Sidebar, bpy.types.Panel):
         layout.label(text="Dope Sheet: View > Show Group Colors", icon="INFO")
 
 
-classes = (MOCAPAL_UL_uncertain, MOCAPAL_PT_label, MOCAPAL_PT_review, MOCAPAL_PT_relabel, MOCAPAL_PT_legend)
+classes = (MOCAPAL_UL_uncertain, MOCAPAL_UL_corrections, MOCAPAL_PT_label, MOCAPAL_PT_review, MOCAPAL_PT_relabel,
+           MOCAPAL_PT_corrections, MOCAPAL_PT_legend)
