@@ -51,9 +51,12 @@ def null_classes(labeling: Labeling) -> np.ndarray:
 
 
 def uncertain_segments(labeling: Labeling, sure: float = SURE) -> np.ndarray:
-    """Indices of the unlocked labeled segments below ``sure``, worst first (then by start frame)."""
-    idx = np.flatnonzero((labeling.label >= 0) & (labeling.confidence < sure) & ~labeling.locked)
-    return idx[np.lexsort((labeling.start[idx], labeling.confidence[idx]))]
+    """Indices of the unlocked segments below ``sure``, worst first (then by start frame).
+
+    Unlabeled segments count too: an uncertain one may be a marker the labeler missed, and the
+    command line and batch count them (:meth:`Labeling.uncertain`, one rule everywhere).
+    """
+    return labeling.uncertain(sure)
 
 
 @dataclass
