@@ -92,17 +92,21 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
 
 
 def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling) -> None:
-    """Rebuild the scene's list of uncertain labeled segments (worst first) from a labeling."""
-    from .review import first_frame
+    """Rebuild the scene's list of uncertain segments (worst first) from a labeling: labeled ones, and
+    unlabeled ones (possible missed markers) under their unlabeled empty's point name (``*N``)."""
+    from ..core.labeling import unlabeled_point_names
+    from .review import current_take, first_frame
 
     settings = scene.mocap_autolabel
     first = first_frame(take_coll)
     idx = uncertain_segments(labeling, settings.sure)
+    points = unlabeled_point_names(current_take(take_coll).names, labeling.names) \
+        if (labeling.label[idx] < 0).any() else None
     items = settings.uncertain
     items.clear()
     for i in idx[:LIST_LIMIT]:
         item = items.add()
-        item.label = labeling.names[labeling.label[i]]
+        item.label = labeling.names[labeling.label[i]] if labeling.label[i] >= 0 else points[labeling.slot[i]]
         item.slot = int(labeling.slot[i])
         item.frame_start = int(labeling.start[i]) + first
         item.frame_end = int(labeling.stop[i]) - 1 + first
