@@ -210,3 +210,55 @@ def test_uncertain_counts_agree_with_the_cli_and_unlabeled_ones_are_reviewable(e
     starts = {(s["point"], s["frame_start"]) for s in cli}
     assert (item.label, item.frame_start) in starts
     assert min(s["frame_start"] for s in cli) >= FIRST
+
+
+# --- Solve Hand runs like Label: progress, Esc cancels and leaves the scene as it was --------------
+
+def test_solve_hand_reports_progress_and_a_cancel_leaves_the_scene_unchanged(empty_scene, bpy_module, take_file):
+    """The modal Solve Hand runs SolveRequest.run on a Job (headless Blender has no window for the modal
+    loop itself): the shares it reports rise to 1, and a cancel stops the solve with nothing built."""
+    import time
+
+    from mocap_autolabel.core.jobs import Job
+    from mocap_autolabel.operators.solve_hand import MOCAPAL_OT_solve_hand, SolveRequest
+
+    bpy = bpy_module
+    coll = _import_and_label(bpy, empty_scene, take_file)
+    _select(bpy, next(iter(coll["mocap_labeled"].objects)))
+    found = MOCAPAL_OT_solve_hand._labeled(type("Props", (), {"filepath": "", "layout_file": "",
+                                                              "layout": "han19"})(), bpy.context)
+    request = SolveRequest(*found)
+    shares, messages = [], []
+
+    def say(message):
+        shares.append(request.share)
+        messages.append(message)
+
+    start = time.perf_counter()
+    solved = request.run(say)
+    seconds = time.perf_counter() - start
+    assert messages[0] == "calibrating the hand" and "solving frames (100 %)" in messages
+    assert shares == sorted(shares) and shares[-1] == pytest.approx(1.0) and len(shares) >= 8
+    assert solved.first_frame == FIRST and seconds < 30
+    # Cancelled as soon as the frames' solve starts: the Job ends cancelled and nothing was added.
+    objects = len(bpy.data.objects)
+    request = SolveRequest(*found)
+    job = Job(lambda say: request.run(lambda m: (job.cancel() if m.startswith("solving") else None, say(m))))
+    assert job.start().wait(60) and job.cancelled
+    assert len(bpy.data.objects) == objects and not [o for o in bpy.data.objects if o.type == "ARMATURE"]
+
+
+def test_the_raw_collection_is_toggled_with_the_outliners_eye(empty_scene, bpy_module, take_file):
+    """Raw is hidden with the eye (the view layer's layer collection), not the monitor flag the Outliner
+    does not show by default; the eye shows it again, and a later edit (a re-solve) leaves it as set."""
+    bpy = bpy_module
+    coll = _import_and_label(bpy, empty_scene, take_file)
+    raw = coll["mocap_raw"]
+    layer = bpy.context.view_layer.layer_collection.children[coll.name].children[raw.name]
+    obj = raw.objects[0]
+    assert not raw.hide_viewport and layer.hide_viewport and not obj.visible_get()
+    layer.hide_viewport = False  # the reviewer clicks the eye
+    bpy.context.scene.frame_set(bpy.context.scene.frame_start + 200)
+    assert any(o.visible_get() for o in raw.objects)
+    assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
+    assert not layer.hide_viewport
