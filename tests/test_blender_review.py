@@ -86,7 +86,7 @@ def test_label_writes_collections_key_types_and_list(labeled):
     st = state(coll)
     lab = st.labeling
     assert (st.layout, st.method, st.temporal) == ("han19", "set", "vote")
-    assert coll["mocap_raw"].hide_viewport and len(coll["mocap_raw"].objects) == lab.n_points
+    assert len(coll["mocap_raw"].objects) == lab.n_points
     assert sorted(labeled_objects(coll)) == sorted(np.unique(lab.label[lab.label >= 0]).tolist())
     assert {o.name for o in coll["mocap_labeled"].objects} <= set(lab.names)
     assert_scene_shows(coll, lab)

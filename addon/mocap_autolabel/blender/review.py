@@ -207,14 +207,37 @@ def _hide_raw(take_coll: bpy.types.Collection) -> None:
     named its points, would otherwise be ``*3.001`` or ``BackHand1.001``). The point's own name
     stays in ``mocap_point``.
     """
+    made = take_coll.get("mocap_raw") is None or take_coll["mocap_raw"].name not in bpy.data.collections
     raw = _child(take_coll, "mocap_raw", "Raw")
+    if made:
+        hide_in_view_layers(raw)
     for obj in list(take_coll.objects):
         if "mocap_slot" in obj:
             raw.objects.link(obj)
             take_coll.objects.unlink(obj)
             obj.name = free_name(obj.get("mocap_point", obj.name) + RAW_SUFFIX, bpy.data.objects, take_coll.name,
                                  current=obj)
-    raw.hide_viewport = raw.hide_render = True
+
+
+def hide_in_view_layers(coll: bpy.types.Collection) -> None:
+    """Hide a collection with the Outliner's eye (its layer collection's ``hide_viewport``) in every
+    view layer that shows it, and from renders, once, when it is made: the reviewer toggles it back
+    with the eye. The collection's own ``hide_viewport`` (the monitor icon, off the Outliner's
+    default filter) stays off, and later edits leave the eye as the reviewer set it."""
+    coll.hide_viewport = False
+    coll.hide_render = True
+    for scene in bpy.data.scenes:
+        for view_layer in scene.view_layers:
+            for layer in _layer_collections(view_layer.layer_collection, coll):
+                layer.hide_viewport = True
+
+
+def _layer_collections(layer: bpy.types.LayerCollection, coll: bpy.types.Collection):
+    """The layer collections of ``coll`` under ``layer`` (a collection may be linked in several places)."""
+    for child in layer.children:
+        if child.collection == coll:
+            yield child
+        yield from _layer_collections(child, coll)
 
 
 def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, labeling: Labeling,
