@@ -262,3 +262,40 @@ def test_the_raw_collection_is_toggled_with_the_outliners_eye(empty_scene, bpy_m
     assert any(o.visible_get() for o in raw.objects)
     assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
     assert not layer.hide_viewport
+
+
+# --- the bad-frames overview, and the Import button ------------------------------------------------
+
+def test_bad_frames_are_marked_on_the_timeline_and_jump_to_worst_goes_there(empty_scene, bpy_module, take_file):
+    from mocap_autolabel.blender.review import load_state
+    from mocap_autolabel.core.review import bad_runs, frame_trouble
+
+    bpy = bpy_module
+    scene = empty_scene
+    scene.timeline_markers.new("mine", frame=5)  # the user's own marker stays
+    coll = _import_and_label(bpy, scene, take_file)
+    lab = load_state(coll).labeling
+    runs = bad_runs(lab, scene.mocap_autolabel.sure)
+    ours = sorted((m.frame, m.name) for m in scene.timeline_markers if m.name.startswith("?syn:"))
+    assert runs and len(ours) == min(20, len(runs))
+    assert sorted(f for f, _ in ours) == sorted(r.start + FIRST for r in runs[:20])
+    assert "mine" in scene.timeline_markers
+    uncertain, missing = frame_trouble(lab, scene.mocap_autolabel.sure)
+    assert bpy.ops.mocap_autolabel.jump_to_worst() == {"FINISHED"}
+    worst = runs[0]
+    peak = scene.frame_current - FIRST
+    assert worst.start <= peak < worst.stop
+    assert (uncertain + missing)[peak] == (uncertain + missing)[worst.start:worst.stop].max() > 0
+    # A re-solve replaces the take's markers instead of adding more.
+    assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
+    assert len([m for m in scene.timeline_markers if m.name.startswith("?syn:")]) == len(ours)
+
+
+def test_the_label_panel_has_an_import_button(empty_scene, bpy_module):
+    """The Mocap tab's Label panel draws the Import operator first (checked on the panel's source: a
+    headless Blender draws no panels)."""
+    import inspect
+
+    from mocap_autolabel.ui.panels import MOCAPAL_PT_label
+
+    assert '"mocap_autolabel.import_markers"' in inspect.getsource(MOCAPAL_PT_label.draw)

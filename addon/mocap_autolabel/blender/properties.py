@@ -112,6 +112,9 @@ def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, l
         item.frame_end = int(labeling.stop[i]) - 1 + first
         item.confidence = float(labeling.confidence[i])
     settings.uncertain_total = len(idx)
+    from .timeline import mark_bad_frames
+
+    mark_bad_frames(scene, take_coll, labeling, settings.sure)  # the Timeline's overview follows the list
     # Writing the index directly would jump; the property's raw storage does not call the update.
     settings["uncertain_index"] = -1
 

@@ -230,3 +230,53 @@ def changed_labels(before: Labeling, after: Labeling) -> np.ndarray:
     moved = set(np.unique(pb[pb != pa])) | set(np.unique(pa[pb != pa]))
     moved |= set(np.flatnonzero((cb != ca).any(axis=0)))
     return np.array(sorted(int(v) for v in moved if v >= 0), dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class BadRun:
+    """A run of frames that needs a look: ``[start, stop)`` sample indices, the most uncertain samples
+    and missing labels in one of its frames, and its ``score`` (the sum over its frames of both)."""
+
+    start: int
+    stop: int
+    uncertain: int
+    missing: int
+    score: int
+
+
+def frame_trouble(labeling: Labeling, sure: float = SURE) -> tuple[np.ndarray, np.ndarray]:
+    """int ``(frames,)`` twice: per frame, the samples in uncertain segments (labeled or not, as
+    :func:`uncertain_segments` counts them), and the labels missing inside their own span (a label
+    is missing at a frame between its first and last sample where no sample carries it: a gap;
+    a label the take never shows is not counted, it would mark every frame)."""
+    per = labeling.per_sample()
+    conf = labeling.per_sample_confidence()
+    locked = labeling._paint(labeling.locked, False, bool)
+    unsure = (per != EMPTY) & (conf < sure) & ~locked
+    uncertain = unsure.sum(axis=1).astype(np.int64)
+    m = len(labeling.names)
+    present = np.zeros((labeling.n_frames, m), dtype=bool)
+    f, s = np.nonzero(per >= 0)
+    present[f, per[f, s]] = True
+    seen = present.any(axis=0)
+    first = np.where(seen, present.argmax(axis=0), labeling.n_frames)
+    last = np.where(seen, labeling.n_frames - 1 - present[::-1].argmax(axis=0), -1)
+    frames = np.arange(labeling.n_frames)[:, None]
+    inside = (frames >= first[None]) & (frames <= last[None])
+    missing = (inside & ~present).sum(axis=1).astype(np.int64)
+    return uncertain, missing
+
+
+def bad_runs(labeling: Labeling, sure: float = SURE, limit: int | None = None) -> list[BadRun]:
+    """The runs of consecutive frames with uncertain samples or missing labels (:func:`frame_trouble`),
+    worst (highest score) first, at most ``limit``."""
+    uncertain, missing = frame_trouble(labeling, sure)
+    score = uncertain + missing
+    bad = np.concatenate([[False], score > 0, [False]])
+    edges = np.flatnonzero(np.diff(bad.astype(np.int8)))
+    runs = []
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        runs.append(BadRun(int(start), int(stop), int(uncertain[start:stop].max()), int(missing[start:stop].max()),
+                           int(score[start:stop].sum())))
+    runs.sort(key=lambda r: (-r.score, r.start))
+    return runs[:limit] if limit is not None else runs
