@@ -92,6 +92,18 @@ def test_an_analog_only_file_creates_nothing(empty_scene, bpy_module, name):
     assert (scene.render.fps, scene.render.fps_base, scene.frame_start, scene.frame_end) == (24, 1.0, 1, 250)
 
 
+def test_a_file_without_a_valid_sample_creates_nothing(empty_scene, bpy_module, tmp_path):
+    from helpers import small_take
+
+    take = small_take(frames=20, points=3)
+    take.positions[:] = np.nan
+    path = tmp_path / "blank.c3d"
+    write_c3d(take, path)
+    with pytest.raises(RuntimeError, match="blank.c3d.*no imported point has a single valid sample"):
+        bpy_module.ops.mocap_autolabel.import_markers(filepath=str(path))
+    assert len(bpy_module.data.collections) == 0 and len(bpy_module.data.objects) == 0
+
+
 def test_a_name_filter_that_matches_nothing_creates_nothing(empty_scene, bpy_module, take_file):
     bpy = bpy_module
     with pytest.raises(RuntimeError, match="no point matches"):

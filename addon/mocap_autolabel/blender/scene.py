@@ -91,6 +91,8 @@ def check_importable(take: Take, options: ImportOptions, label: str = "") -> np.
         raise MocapInputError(label, f"no point matches the Point Names pattern {options.name_filter!r} "
                                      f"(the file has {take.n_points}: {', '.join(take.names[:5])}"
                                      f"{'...' if take.n_points > 5 else ''}); nothing imported")
+    if not take.valid[:, slots].any():
+        raise MocapInputError(label, "no imported point has a single valid sample; nothing imported")
     return slots
 
 
