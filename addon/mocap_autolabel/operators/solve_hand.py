@@ -47,6 +47,19 @@ class SolveRequest:
                           progress=progress)
 
 
+def _stage_printer():
+    """Print each stage once (a headless Blender shows no status bar; the shares would be noise)."""
+    said = set()
+
+    def say(message: str) -> None:
+        stage = message.split(" (")[0]
+        if stage not in said:
+            said.add(stage)
+            print(f"mocap_autolabel: {stage}", flush=True)
+
+    return say
+
+
 class MOCAPAL_OT_solve_hand(bpy.types.Operator):
     """Fit the rigged hand to a labeled take: calibrate the performer (or reuse a calibration), solve every
     frame, and add the keyed armature with its markers to the scene"""
@@ -157,7 +170,7 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         if self.in_background and context.window is not None and not bpy.app.background:
             return self._start(context, request)
         try:
-            solved = request.run()
+            solved = request.run(_stage_printer() if bpy.app.background else None)
         except Exception as exc:
             return self._fail(exc, request.source)
         return self._finish(context, request, solved)
