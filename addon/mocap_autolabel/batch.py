@@ -208,7 +208,7 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
 
     from .core.errors import MocapInputError
     from .core.formats.c3d import write_c3d
-    from .core.labeling import labeled_take
+    from .core.labeling import labeled_take, unlabeled_point_names
     from .core.layout import load_layout
     from .core.pipeline import label_take, layout_doubt, solve_take, time_limit_warning
     from .core.take import read_take
@@ -237,7 +237,8 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
                                     f"{layout.name} markers labeled with some confidence within {HAND_REACH:g} m "
                                     f"of each other ({hint})")
     out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
-           "hand_frames": round(hand_frames, 4), "summary": labeling.summary(settings.confident),
+           "hand_frames": round(hand_frames, 4), "summary": labeling.summary(
+               settings.confident, take.first_frame, unlabeled_point_names(take.names, layout.names)),
            "outputs": {}}
     said = [str(w) for w in (doubt, time_limit_warning(labeling)) if w]
     if said:

@@ -310,7 +310,7 @@ def _label(args) -> int:
     import numpy as np
 
     from .core.atomic import atomic_output
-    from .core.labeling import labeled_take, layout_markers
+    from .core.labeling import labeled_take, layout_markers, unlabeled_point_names
     from .core.layout import load_layout
     from .core.pipeline import label_take, layout_doubt, time_limit_warning
     from .core.synth.generate import load_truth, truth_path
@@ -371,7 +371,8 @@ def _label(args) -> int:
             write_review_scene(take, args.layout, labeling, args.blend, args.method, args.temporal, solved)
     except Exception as exc:
         return _fail(args.file, exc)
-    summary = labeling.summary()
+    # Frames as the file (and Blender, on import) numbers them; points as the labeled C3D names them.
+    summary = labeling.summary(first_frame=take.first_frame, points=unlabeled_point_names(take.names, layout.names))
     seconds = labeling.info["seconds"]["total"]
     print(f"{args.file}: {args.method} + {args.temporal} on {layout.name}, {take.n_frames} frames in {seconds:.2f} s "
           f"({take.n_frames / max(seconds, 1e-9):,.0f} frames/s); {summary['labeled_segments']} segments labeled, "

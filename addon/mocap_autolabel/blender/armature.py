@@ -175,15 +175,22 @@ def solved_hand_collection(scene: bpy.types.Scene, source: str, name: str) -> bp
     return collection
 
 
-def build_solved_hand(solved, collection: bpy.types.Collection | None = None, name: str = "Hand") -> bpy.types.Object:
+def build_solved_hand(solved, collection: bpy.types.Collection | None = None, name: str = "Hand",
+                      scale: float = 1.0) -> bpy.types.Object:
     """The calibrated rig of a :class:`~mocap_autolabel.core.pipeline.HandSolve`, keyed on every solved
-    frame, its markers placed by the calibration; the calibration is kept on the armature."""
+    frame (``solved.first_frame`` on), its markers placed by the calibration; the calibration is kept on
+    the armature.
+
+    ``scale`` is the take's import Scale (Blender units per metre): the armature object gets it, so the
+    rig, its skin and its markers sit on the take's empties while bones and keys stay in metres (the
+    core's units, and what FBX/BVH export and a re-solve expect)."""
     import json
 
     cal = solved.calibration
     hand = cal.hand()
     objs = build_hand(hand, name=name, collection=collection, layout=solved.layout, binding=cal.binding(solved.layout))
     arm = objs["armature"]
+    arm.scale = (scale, scale, scale)
     arm["mocap_calibration"] = json.dumps(cal.to_dict())
     arm["mocap_marker_rms_mm"] = solved.fit.overall_rms() * 1000
     key_poses(arm, hand, solved.fit.poses, first_frame=solved.first_frame)

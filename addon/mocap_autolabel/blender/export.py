@@ -52,6 +52,26 @@ def save_blend(path: str) -> None:
         bpy.ops.wm.save_as_mainfile(filepath=tmp, check_existing=False, copy=True)
 
 
+def export_labeled_c3d(take_coll: bpy.types.Collection, path: str) -> None:
+    """Write a reviewed take of the scene as a labeled C3D (``core.labeling.labeled_take``): the
+    layout's markers by name, then one point per trajectory left unlabeled, named as its empty in
+    the scene (the file's own name, or ``*<slot>``).
+
+    The file is in the take's own terms, not the scene's: positions in the file's units (the
+    import's Scale taken off), frames numbered as the file numbered them (the import's Frame
+    Offset taken off), so a round trip gives the original first frame.
+    """
+    from ..core.formats.c3d import write_c3d
+    from ..core.labeling import labeled_take
+    from ..core.take import UNIT_SCALE
+    from .review import current_take, load_state
+    from .scene import file_frames
+
+    take = file_frames(take_coll, current_take(take_coll))
+    units = take.source_units if take.source_units in UNIT_SCALE else "mm"
+    write_c3d(labeled_take(take, load_state(take_coll).labeling), path, units=units)
+
+
 def write_solved_scene(take, solved, blend: str | None = None, fbx: str | None = None,
                        bvh: str | None = None) -> dict[str, str]:
     """A fresh scene with the labeled markers beside the solved, keyed rig; then the asked-for files.

@@ -136,23 +136,30 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
 
 
 def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling) -> None:
-    """Rebuild the scene's list of uncertain labeled segments (worst first) from a labeling, and the
-    list of the take's corrections."""
-    from .review import first_frame
+    """Rebuild the scene's list of uncertain segments (worst first) from a labeling: labeled ones, and
+    unlabeled ones (possible missed markers) under their unlabeled empty's point name (``*N``); and
+    the list of the take's corrections."""
+    from ..core.labeling import unlabeled_point_names
+    from .review import current_take, first_frame
 
     settings = scene.mocap_autolabel
     first = first_frame(take_coll)
     idx = uncertain_segments(labeling, settings.sure)
+    points = unlabeled_point_names(current_take(take_coll).names, labeling.names) \
+        if (labeling.label[idx] < 0).any() else None
     items = settings.uncertain
     items.clear()
     for i in idx[:LIST_LIMIT]:
         item = items.add()
-        item.label = labeling.names[labeling.label[i]]
+        item.label = labeling.names[labeling.label[i]] if labeling.label[i] >= 0 else points[labeling.slot[i]]
         item.slot = int(labeling.slot[i])
         item.frame_start = int(labeling.start[i]) + first
         item.frame_end = int(labeling.stop[i]) - 1 + first
         item.confidence = float(labeling.confidence[i])
     settings.uncertain_total = len(idx)
+    from .timeline import mark_bad_frames
+
+    mark_bad_frames(scene, take_coll, labeling, settings.sure)  # the Timeline's overview follows the list
     # Writing the index directly would jump; the property's raw storage does not call the update.
     settings["uncertain_index"] = -1
     refresh_corrections(scene, take_coll, labeling)

@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass, field
 import bpy
 import numpy as np
 
-from ..core.labeling import EMPTY, Labeling
+from ..core.labeling import EMPTY, Labeling, unlabeled_point_names
 from ..core.layout import Layout, load_layout
 from ..core.review import (
     CLASS_NAMES,
@@ -40,7 +40,7 @@ from ..core.review import (
 )
 from ..core.take import Take
 from . import animio
-from .scene import key_track, new_marker
+from .scene import free_name, key_track, new_marker
 
 #: Channel-group colour set of each digit (Blender's bone colour sets: red, orange, green,
 #: blue, violet, grey); the viewport overlay draws the same colours.
@@ -82,7 +82,7 @@ def take_collection(obj_or_collection) -> bpy.types.Collection | None:
 def _child(take_coll: bpy.types.Collection, key: str, name: str) -> bpy.types.Collection:
     coll = take_coll.get(key)
     if coll is None or coll.name not in bpy.data.collections:
-        coll = bpy.data.collections.new(name)
+        coll = bpy.data.collections.new(free_name(name, bpy.data.collections, take_coll.name))
         take_coll.children.link(coll)
         coll["mocap_take"] = take_coll
         take_coll[key] = coll
@@ -132,7 +132,8 @@ def read_take(take_coll: bpy.types.Collection) -> Take:
         if idx is not None:
             positions[idx, slot] = xyz / scale
     return Take(positions=positions, names=names, rate=float(take_coll.get("mocap_rate", 100.0)),
-                first_frame=first, source=take_coll.get("mocap_source", ""))
+                first_frame=first, source=take_coll.get("mocap_source", ""),
+                source_units=str(take_coll.get("mocap_units", "mm")))
 
 
 # --- the stored review state ------------------------------------------------------------------
@@ -208,13 +209,37 @@ def _hide_raw(take_coll: bpy.types.Collection) -> None:
     named its points, would otherwise be ``*3.001`` or ``BackHand1.001``). The point's own name
     stays in ``mocap_point``.
     """
+    made = take_coll.get("mocap_raw") is None or take_coll["mocap_raw"].name not in bpy.data.collections
     raw = _child(take_coll, "mocap_raw", "Raw")
+    if made:
+        hide_in_view_layers(raw)
     for obj in list(take_coll.objects):
         if "mocap_slot" in obj:
             raw.objects.link(obj)
             take_coll.objects.unlink(obj)
-            obj.name = obj.name + RAW_SUFFIX
-    raw.hide_viewport = raw.hide_render = True
+            obj.name = free_name(obj.get("mocap_point", obj.name) + RAW_SUFFIX, bpy.data.objects, take_coll.name,
+                                 current=obj)
+
+
+def hide_in_view_layers(coll: bpy.types.Collection) -> None:
+    """Hide a collection with the Outliner's eye (its layer collection's ``hide_viewport``) in every
+    view layer that shows it, and from renders, once, when it is made: the reviewer toggles it back
+    with the eye. The collection's own ``hide_viewport`` (the monitor icon, off the Outliner's
+    default filter) stays off, and later edits leave the eye as the reviewer set it."""
+    coll.hide_viewport = False
+    coll.hide_render = True
+    for scene in bpy.data.scenes:
+        for view_layer in scene.view_layers:
+            for layer in _layer_collections(view_layer.layer_collection, coll):
+                layer.hide_viewport = True
+
+
+def _layer_collections(layer: bpy.types.LayerCollection, coll: bpy.types.Collection):
+    """The layer collections of ``coll`` under ``layer`` (a collection may be linked in several places)."""
+    for child in layer.children:
+        if child.collection == coll:
+            yield child
+        yield from _layer_collections(child, coll)
 
 
 def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, labeling: Labeling,
@@ -256,7 +281,7 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
         obj = objs.get(label)
         finger = finger_of(layout, label)
         if obj is None:
-            obj = new_marker(layout.names[label], labeled, scale)
+            obj = new_marker(free_name(layout.names[label], bpy.data.objects, take_coll.name), labeled, scale)
             obj["mocap_label"] = label
             obj.color = (*theme_color(finger), 1.0)
         valid = classes[:, label] >= 0
@@ -273,13 +298,14 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
     else:
         slots = np.flatnonzero((null_classes(previous, previous_sure) != null_class).any(axis=0))
     nulls = _null_objects(unlabeled)
+    point_names = unlabeled_point_names(take.names, labeling.names)
     for slot in slots:
         valid = null_class[:, slot] >= 0
         obj = nulls.get(int(slot))
         if obj is None:
             if not valid.any():
                 continue
-            obj = new_marker(f"*{slot}", unlabeled, scale)
+            obj = new_marker(free_name(point_names[slot], bpy.data.objects, take_coll.name), unlabeled, scale)
             obj["mocap_null"] = int(slot)
             obj["mocap_point"] = take.names[slot]
         key_track(obj, frames_all, valid, take.positions[:, slot] * scale, types[null_class[valid, slot]],

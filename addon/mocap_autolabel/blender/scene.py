@@ -49,6 +49,53 @@ def set_scene_timing(scene: bpy.types.Scene, rate: float, first: int, last: int)
     scene.frame_current = first
 
 
+def free_name(wanted: str, datablocks, owner: str, current=None) -> str:
+    """A name for a datablock of a take that clashes with no other: ``wanted`` while it is free in
+    ``datablocks`` (``bpy.data.objects``, ``bpy.data.collections``...), else ``<owner>:<wanted>``.
+
+    Blender names are unique per file and it would append ``.001`` to the second ``IndexTip`` or
+    ``Labeled``: that hides which take an object belongs to, and a script looking for
+    ``IndexTip`` finds the wrong one. The first take in a scene keeps the plain names; a later
+    take whose names are taken gets its collection's name as a prefix (``take2:IndexTip``, the
+    subject-prefix style capture software writes). ``current`` is the datablock being renamed,
+    which may already hold the name.
+    """
+    held = datablocks.get(wanted)
+    if held is None or held == current:
+        return wanted
+    return f"{owner}:{wanted}"
+
+
+def take_collection_name(take: Take) -> str:
+    """The new take collection's name: the file's name, or ``<file> 2``, ``<file> 3``... when a take
+    of that name is already in the file (never Blender's ``.001``)."""
+    base = os.path.splitext(os.path.basename(take.source))[0] if take.source else "take"
+    name, n = base, 1
+    while name in bpy.data.collections:
+        n += 1
+        name = f"{base} {n}"
+    return name
+
+
+def check_importable(take: Take, options: ImportOptions, label: str = "") -> np.ndarray:
+    """The slots to import; raises :class:`MocapInputError` when there is nothing to import, so that
+    nothing is created and the scene's rate and range stay as they were (an analog-only C3D, such as
+    a force-plate recording, holds no marker point at all)."""
+    from ..core.errors import MocapInputError
+
+    label = label or take.source or "take"
+    if take.n_points == 0 or take.n_frames == 0:
+        raise MocapInputError(label, "the file holds no marker points (analog data only?); nothing imported")
+    slots = selected_points(take, options.name_filter)
+    if not len(slots):
+        raise MocapInputError(label, f"no point matches the Point Names pattern {options.name_filter!r} "
+                                     f"(the file has {take.n_points}: {', '.join(take.names[:5])}"
+                                     f"{'...' if take.n_points > 5 else ''}); nothing imported")
+    if not take.valid[:, slots].any():
+        raise MocapInputError(label, "no imported point has a single valid sample; nothing imported")
+    return slots
+
+
 def build_take(take: Take, scene: bpy.types.Scene, options: ImportOptions | None = None,
                name: str | None = None) -> bpy.types.Collection:
     """Create a collection of animated empties for ``take`` in ``scene``.
@@ -58,25 +105,36 @@ def build_take(take: Take, scene: bpy.types.Scene, options: ImportOptions | None
     empty's ``hide_viewport``/``hide_render`` are keyed on during the gap, so a missing
     marker is seen as missing rather than as an invented straight line.
 
+    The collection keeps what everything built later for the take needs to stay in the take's
+    own terms: ``mocap_scale`` (Blender units per metre), ``mocap_first`` (the Blender frame of
+    sample 0), ``mocap_offset`` (the import's Frame Offset: exports take it off again),
+    ``mocap_units`` (the file's units, which exports write), ``mocap_rate`` and ``mocap_source``.
+
+    Raises:
+        MocapInputError: nothing to import (see :func:`check_importable`); nothing is created.
+
     Returns:
-        the new collection, named after the take's file (Blender adds .001 if taken).
+        the new collection, named after the take's file (see :func:`take_collection_name`).
     """
     options = options or ImportOptions()
-    name = name or (os.path.splitext(os.path.basename(take.source))[0] if take.source else "take")
+    slots = check_importable(take, options)
+    name = name or take_collection_name(take)
     collection = bpy.data.collections.new(name)
     scene.collection.children.link(collection)
     collection["mocap_source"] = take.source
     collection["mocap_rate"] = float(take.rate)
+    collection["mocap_units"] = take.source_units
 
     collection["mocap_scale"] = float(options.scale)
     first = int(take.first_frame) + int(options.frame_offset)
     collection["mocap_first"] = first  # the Blender frame of positions[0]
+    collection["mocap_offset"] = int(options.frame_offset)
     frames_all = np.arange(take.n_frames, dtype=np.float32) + first
     valid_all = take.valid
-    for slot in selected_points(take, options.name_filter):
-        obj = new_marker(take.names[slot], collection, options.scale)
+    for slot in slots:
+        obj = new_marker(free_name(take.names[slot], bpy.data.objects, collection.name), collection, options.scale)
         obj["mocap_slot"] = int(slot)
-        obj["mocap_point"] = take.names[slot]  # the object's name may get a .001
+        obj["mocap_point"] = take.names[slot]  # the object's name may carry the take's prefix
         valid = valid_all[:, slot]
         if not valid.any():
             obj.hide_viewport = obj.hide_render = True
@@ -86,6 +144,15 @@ def build_take(take: Take, scene: bpy.types.Scene, options: ImportOptions | None
     if options.set_scene and take.n_frames:
         set_scene_timing(scene, take.rate, first, first + take.n_frames - 1)
     return collection
+
+
+def file_frames(take_coll: bpy.types.Collection, take: Take) -> Take:
+    """``take`` read back from the scene (frames as Blender shows them) in the file's own frame
+    numbers and units again, for writing out: the import's Frame Offset is taken off."""
+    import dataclasses
+
+    return dataclasses.replace(take, first_frame=int(take.first_frame) - int(take_coll.get("mocap_offset", 0)),
+                               source_units=str(take_coll.get("mocap_units", take.source_units)))
 
 
 def new_marker(name: str, collection: bpy.types.Collection, scale: float = 1.0) -> bpy.types.Object:

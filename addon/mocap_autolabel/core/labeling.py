@@ -7,6 +7,7 @@ pipeline decides, and everything a reviewer changes, is said in segments.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,17 +105,35 @@ class Labeling:
                         label=(self.label[keep] - first).astype(np.int16), confidence=self.confidence[keep],
                         locked=self.locked[keep], info=self.info, evidence=evidence)
 
-    def summary(self, confident: float = 0.95) -> dict:
+    def uncertain(self, confident: float = 0.95) -> np.ndarray:
+        """Indices of the segments a reviewer should look at: unlocked, below ``confident``, labeled or
+        not (an uncertain unlabeled trajectory may be a missed marker), worst first, then by start."""
+        idx = np.flatnonzero((self.confidence < confident) & ~self.locked & (self.length > 0))
+        return idx[np.lexsort((self.start[idx], self.confidence[idx]))]
+
+    def summary(self, confident: float = 0.95, first_frame: int = 0,
+                points: list[str] | None = None) -> dict:
         """Counts for reports: segments, labeled samples, the share of labeled samples at or above
-        ``confident``, and the uncertain labeled segments (worst first) with their frame ranges."""
+        ``confident``, and the uncertain segments (labeled or not, worst first; see :meth:`uncertain`).
+
+        Each uncertain segment gives its ``slot``, its ``start``/``stop`` sample indices
+        (0-based, stop exclusive), ``frame_start``/``frame_end`` in the take's own frame numbers
+        (``first_frame`` is the frame of sample 0, as the file and Blender count; both inclusive),
+        its ``label`` (None: unlabeled), the ``point`` that shows it in the labeled C3D and in
+        Blender (the label, or the unlabeled point's name from ``points``, default ``*<slot>``) and
+        its ``confidence``.
+        """
         named = self.label >= 0
         samples = self.length
         sure = named & (self.confidence >= confident)
-        order = np.argsort(self.confidence)
-        uncertain = [{"slot": int(self.slot[i]), "start": int(self.start[i]), "stop": int(self.stop[i]),
-                      "label": self.names[self.label[i]] if self.label[i] >= 0 else None,
-                      "confidence": round(float(self.confidence[i]), 4)}
-                     for i in order if self.confidence[i] < confident and self.length[i] > 0]
+        uncertain = []
+        for i in self.uncertain(confident):
+            label = self.names[self.label[i]] if self.label[i] >= 0 else None
+            point = label or (points[self.slot[i]] if points is not None else f"*{int(self.slot[i])}")
+            uncertain.append({"slot": int(self.slot[i]), "start": int(self.start[i]), "stop": int(self.stop[i]),
+                              "frame_start": int(self.start[i]) + int(first_frame),
+                              "frame_end": int(self.stop[i]) - 1 + int(first_frame),
+                              "label": label, "point": point, "confidence": round(float(self.confidence[i]), 4)})
         return {
             "segments": len(self),
             "labeled_segments": int(named.sum()),
@@ -126,9 +145,33 @@ class Labeling:
         }
 
 
+#: A point name that says nothing (``*12``, as capture systems call unlabeled trajectories).
+_ANONYMOUS = re.compile(r"\*\d+")
+
+
+def unlabeled_point_names(names: list[str], labels: list[str]) -> list[str]:
+    """The name of each point slot's unlabeled samples, in the labeled C3D and in Blender.
+
+    A name the file gave (``right_elbow``, ``pillow_top``) is kept; an anonymous one (``*N``,
+    empty) becomes ``*<slot>``, so that one ``*N`` means the same trajectory in the scene, the
+    report and the export. A file name that is also a label of the layout, or a second slot of
+    the same name, would make two points of one name: those become ``*<slot>`` too.
+    """
+    taken = set(labels)
+    out = []
+    for slot, name in enumerate(names):
+        name = name.strip()
+        if not name or _ANONYMOUS.fullmatch(name) or name in taken:
+            name = f"*{slot}"
+        taken.add(name)
+        out.append(name)
+    return out
+
+
 def labeled_take(take: Take, labeling: Labeling) -> Take:
-    """The labeled take: the layout's M points by name (NaN where missing), then one ``*N`` point
-    per input slot holding that slot's unassigned samples (slots with none are left out).
+    """The labeled take: the layout's M points by name (NaN where missing), then one point per input
+    slot holding that slot's unassigned samples (slots with none are left out), named by
+    :func:`unlabeled_point_names`: the file's own name, or ``*<slot>``.
 
     Every input sample ends in exactly one output point (the test suite checks it on real files).
     """
@@ -144,6 +187,7 @@ def labeled_take(take: Take, labeling: Labeling) -> Take:
         raise ValueError("labeling gives one label to two samples of the same frame")
     out_named[f, lab] = take.positions[f, p]
     keep = np.flatnonzero(rest.any(axis=0))
+    rest_names = unlabeled_point_names(take.names, labeling.names)
     out_rest = np.where(rest[:, keep, None], take.positions[:, keep], np.nan).astype(np.float32)
     residuals = None
     if take.residuals is not None:
@@ -152,7 +196,7 @@ def labeled_take(take: Take, labeling: Labeling) -> Take:
         res_rest = np.where(rest[:, keep], take.residuals[:, keep], np.nan).astype(np.float32)
         residuals = np.concatenate([res_named, res_rest], axis=1)
     return Take(positions=np.concatenate([out_named, out_rest], axis=1),
-                names=list(labeling.names) + [f"*{i}" for i in range(len(keep))], rate=take.rate,
+                names=list(labeling.names) + [rest_names[i] for i in keep], rate=take.rate,
                 first_frame=take.first_frame, source_units=take.source_units, residuals=residuals,
                 source=take.source, vendor=take.vendor)
 

@@ -52,9 +52,12 @@ def null_classes(labeling: Labeling, sure: float = SURE) -> np.ndarray:
 
 
 def uncertain_segments(labeling: Labeling, sure: float = SURE) -> np.ndarray:
-    """Indices of the unlocked labeled segments below ``sure``, worst first (then by start frame)."""
-    idx = np.flatnonzero((labeling.label >= 0) & (labeling.confidence < sure) & ~labeling.locked)
-    return idx[np.lexsort((labeling.start[idx], labeling.confidence[idx]))]
+    """Indices of the unlocked segments below ``sure``, worst first (then by start frame).
+
+    Unlabeled segments count too: an uncertain one may be a marker the labeler missed, and the
+    command line and batch count them (:meth:`Labeling.uncertain`, one rule everywhere).
+    """
+    return labeling.uncertain(sure)
 
 
 def walk_uncertain(labeling: Labeling, sure: float, frame: int, current: tuple[int, int] | None = None,
@@ -346,3 +349,53 @@ def stage_progress(check_layout: bool = False):
         return f"{message} (stage {k + 1} of {len(stages)})", done
 
     return track
+
+
+@dataclass(frozen=True)
+class BadRun:
+    """A run of frames that needs a look: ``[start, stop)`` sample indices, the most uncertain samples
+    and missing labels in one of its frames, and its ``score`` (the sum over its frames of both)."""
+
+    start: int
+    stop: int
+    uncertain: int
+    missing: int
+    score: int
+
+
+def frame_trouble(labeling: Labeling, sure: float = SURE) -> tuple[np.ndarray, np.ndarray]:
+    """int ``(frames,)`` twice: per frame, the samples in uncertain segments (labeled or not, as
+    :func:`uncertain_segments` counts them), and the labels missing inside their own span (a label
+    is missing at a frame between its first and last sample where no sample carries it: a gap;
+    a label the take never shows is not counted, it would mark every frame)."""
+    per = labeling.per_sample()
+    conf = labeling.per_sample_confidence()
+    locked = labeling._paint(labeling.locked, False, bool)
+    unsure = (per != EMPTY) & (conf < sure) & ~locked
+    uncertain = unsure.sum(axis=1).astype(np.int64)
+    m = len(labeling.names)
+    present = np.zeros((labeling.n_frames, m), dtype=bool)
+    f, s = np.nonzero(per >= 0)
+    present[f, per[f, s]] = True
+    seen = present.any(axis=0)
+    first = np.where(seen, present.argmax(axis=0), labeling.n_frames)
+    last = np.where(seen, labeling.n_frames - 1 - present[::-1].argmax(axis=0), -1)
+    frames = np.arange(labeling.n_frames)[:, None]
+    inside = (frames >= first[None]) & (frames <= last[None])
+    missing = (inside & ~present).sum(axis=1).astype(np.int64)
+    return uncertain, missing
+
+
+def bad_runs(labeling: Labeling, sure: float = SURE, limit: int | None = None) -> list[BadRun]:
+    """The runs of consecutive frames with uncertain samples or missing labels (:func:`frame_trouble`),
+    worst (highest score) first, at most ``limit``."""
+    uncertain, missing = frame_trouble(labeling, sure)
+    score = uncertain + missing
+    bad = np.concatenate([[False], score > 0, [False]])
+    edges = np.flatnonzero(np.diff(bad.astype(np.int8)))
+    runs = []
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        runs.append(BadRun(int(start), int(stop), int(uncertain[start:stop].max()), int(missing[start:stop].max()),
+                           int(score[start:stop].sum())))
+    runs.sort(key=lambda r: (-r.score, r.start))
+    return runs[:limit] if limit is not None else runs

@@ -42,7 +42,7 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
         return ImportHelper.invoke(self, context, event)
 
     def execute(self, context):
-        from ..blender.scene import ImportOptions, build_take
+        from ..blender.scene import ImportOptions, build_take, check_importable
         from ..core.errors import MocapInputError
         from ..core.take import read_take
 
@@ -55,6 +55,7 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
         for path in paths:
             try:
                 take = read_take(path)
+                check_importable(take, options, os.path.basename(path))  # before anything is created
             except MocapInputError as exc:
                 self.report({"ERROR"}, str(exc))
                 continue

@@ -637,15 +637,13 @@ class MOCAPAL_OT_export_labeled(bpy.types.Operator, ExportHelper):
         return ExportHelper.invoke(self, context, event)
 
     def execute(self, context):
-        from ..blender.review import current_take, load_state
+        from ..blender.export import export_labeled_c3d
         from ..core.errors import MocapInputError
-        from ..core.formats.c3d import write_c3d
-        from ..core.labeling import labeled_take
 
         coll = reviewed_panel_take(context)
         path = bpy.path.abspath(self.filepath)
         try:
-            write_c3d(labeled_take(current_take(coll), load_state(coll).labeling), path)
+            export_labeled_c3d(coll, path)  # in the take's own frames and units
         except (MocapInputError, OSError, ValueError) as exc:
             self.report({"ERROR"}, f"{path}: {exc}")
             return {"CANCELLED"}

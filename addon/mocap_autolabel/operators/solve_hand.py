@@ -1,14 +1,63 @@
-"""Solve Hand: fit the calibrated rig to the labeled take in the scene (or a labeled file)."""
+"""Solve Hand: fit the calibrated rig to the labeled take in the scene (or a labeled file).
+
+From the panel it runs like Label Markers: the solve works on a worker thread while Blender stays
+responsive, the status bar shows the stage and the share of frames done, Esc cancels and leaves
+the scene as it was (nothing is built until the solve is complete). From a script it runs at once.
+"""
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
 
 from ..blender.properties import LAYOUT_DEFAULT, _layouts
 from .review import context_take, reviewed_take
+
+
+@dataclass
+class SolveRequest:
+    """Everything a solve needs, gathered on the main thread so that :meth:`run` touches no Blender data.
+
+    ``take`` is in the scene's frames (``take.first_frame`` is the Blender frame of sample 0) and in
+    metres; ``scale`` is the take's import Scale, which the rig gets.
+    """
+
+    take: object
+    layout: object
+    source: str  # the take collection's name, or the labeled file's path
+    scale: float = 1.0
+    calibration: object = None
+    smooth_hz: float = 10.0
+    share: float = 0.0  # of the work done, set as the solve goes
+
+    def run(self, say=None):
+        """The :class:`~mocap_autolabel.core.pipeline.HandSolve`; ``say(message)`` gets each stage
+        (and may raise to stop, as a cancelled Job's does)."""
+        from ..core.pipeline import solve_take
+
+        def progress(message: str, share: float) -> None:
+            self.share = share
+            if say is not None:
+                say(message)
+
+        return solve_take(self.take, self.layout, calibration=self.calibration, smooth_hz=self.smooth_hz,
+                          progress=progress)
+
+
+def _stage_printer():
+    """Print each stage once (a headless Blender shows no status bar; the shares would be noise)."""
+    said = set()
+
+    def say(message: str) -> None:
+        stage = message.split(" (")[0]
+        if stage not in said:
+            said.add(stage)
+            print(f"mocap_autolabel: {stage}", flush=True)
+
+    return say
 
 
 class MOCAPAL_OT_solve_hand(bpy.types.Operator):
@@ -33,11 +82,15 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
                                      description="Write the calibration used to this .json file")
     smooth_hz: FloatProperty(name="Smoothing (Hz)", default=10.0, min=0.0, soft_max=30.0,
                              description="Low-pass cut-off of the pose track; 0 keeps every frame's own fit")
+    # Set by invoke (the panel's button): the dialog's OK then runs the solve in the background.
+    in_background: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
 
     def _labeled(self, context):
-        """``(take, layout, name)`` to solve, or None: the file given; else the reviewed take of the
-        active marker (or of the panel) with its current labels, corrections included, and the layout
-        it was labeled with; else the file of the active marker's take (an imported labeled file)."""
+        """``(take, layout, name, scale)`` to solve, or None: the file given; else the reviewed take of
+        the active marker (or of the panel) with its current labels, corrections included, and the
+        layout it was labeled with; else the active marker's take as imported (a labeled file). A take
+        of the scene is read from its empties, so it is in the scene's frames, and the rig gets its
+        import Scale."""
         from ..blender.review import current_take, load_state, state_layout
         from ..core.labeling import labeled_take
         from ..core.layout import load_layout
@@ -48,48 +101,114 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
 
         if self.filepath:
             path = bpy.path.abspath(self.filepath)
-            return read_take(path), chosen_layout(), path
+            return read_take(path), chosen_layout(), path, 1.0
         coll = reviewed_take(context)
         if coll is not None:
             state = load_state(coll)
-            return labeled_take(current_take(coll), state.labeling), state_layout(state), coll.name
+            return (labeled_take(current_take(coll), state.labeling), state_layout(state), coll.name,
+                    float(coll.get("mocap_scale", 1.0)))
         coll = context_take(context)
         if coll is not None and coll.get("mocap_source"):
-            return read_take(coll["mocap_source"]), chosen_layout(), coll["mocap_source"]
+            return current_take(coll), chosen_layout(), coll.name, float(coll.get("mocap_scale", 1.0))
         return None
 
+    def _request(self, context) -> SolveRequest | None:
+        from ..core.hand.calibrate import Calibration
+
+        found = self._labeled(context)
+        if found is None:
+            return None
+        take, layout, source, scale = found
+        calibration = Calibration.load(bpy.path.abspath(self.calibration)) if self.calibration else None
+        return SolveRequest(take, layout, source, scale, calibration, self.smooth_hz)
+
+    def _fail(self, exc: BaseException, source: str) -> set[str]:
+        from ..core.errors import MocapInputError
+
+        if isinstance(exc, MocapInputError):
+            self.report({"ERROR"}, str(exc))
+        else:  # never let a bad file take Blender down
+            self.report({"ERROR"}, f"{source}: unexpected error while solving ({type(exc).__name__}: {exc})")
+        return {"CANCELLED"}
+
+    def _finish(self, context, request: SolveRequest, solved) -> set[str]:
+        """Build the rig (replacing an earlier solve of the same take) and report."""
+        from ..blender.armature import build_solved_hand, solved_hand_collection
+        from ..blender.scene import free_name
+
+        try:
+            if self.save_calibration:
+                solved.calibration.save(bpy.path.abspath(self.save_calibration))
+        except Exception as exc:
+            return self._fail(exc, self.save_calibration)
+        base = os.path.splitext(os.path.basename(request.source))[0]
+        collection = solved_hand_collection(context.scene, request.source, f"{base} hand")
+        # "Hand" for the first take's rig, "<take>:Hand" beside another take's (never "Hand.001").
+        name = free_name("Hand", bpy.data.objects, base)
+        arm = build_solved_hand(solved, collection, name=name, scale=request.scale)
+        report = solved.report()
+        seconds = sum(solved.seconds.values())
+        self.report({"INFO"}, f"Solved {report['solved_frames']} of {report['frames']} frames in {seconds:.1f} s: "
+                              f"marker RMS {report['marker_rms_mm']:.2f} mm, {report['frames_over_gate']} frames "
+                              f"over the {report['gate_mm']:g} mm gate ({arm.name})")
+        return {"FINISHED"}
+
     def invoke(self, context, event):
+        self.in_background = True
         return context.window_manager.invoke_props_dialog(self)
 
     def execute(self, context):
-        from ..blender.armature import build_solved_hand, solved_hand_collection
-        from ..core.errors import MocapInputError
-        from ..core.hand.calibrate import Calibration
-        from ..core.pipeline import solve_take
-
         source = self.filepath or "the take"
         try:
-            found = self._labeled(context)
-            if found is None:
-                self.report({"ERROR"}, "No labeled take: label the imported take, select one of its markers, "
-                                       "or give a labeled file")
-                return {"CANCELLED"}
-            take, layout, source = found
-            calibration = Calibration.load(bpy.path.abspath(self.calibration)) if self.calibration else None
-            solved = solve_take(take, layout, calibration=calibration, smooth_hz=self.smooth_hz)
-            if self.save_calibration:
-                solved.calibration.save(bpy.path.abspath(self.save_calibration))
-        except MocapInputError as exc:
-            self.report({"ERROR"}, str(exc))
+            request = self._request(context)
+        except Exception as exc:
+            return self._fail(exc, source)
+        if request is None:
+            self.report({"ERROR"}, "No labeled take: label the imported take, select one of its markers, "
+                                   "or give a labeled file")
             return {"CANCELLED"}
-        except Exception as exc:  # never let a bad file take Blender down
-            self.report({"ERROR"}, f"{source}: unexpected error while solving ({type(exc).__name__}: {exc})")
+        if self.in_background and context.window is not None and not bpy.app.background:
+            return self._start(context, request)
+        try:
+            solved = request.run(_stage_printer() if bpy.app.background else None)
+        except Exception as exc:
+            return self._fail(exc, request.source)
+        return self._finish(context, request, solved)
+
+    # --- running on a worker thread, like Label Markers ---------------------------------------
+
+    def _start(self, context, request: SolveRequest) -> set[str]:
+        from ..core.jobs import Job
+
+        self._pending = request
+        self._job = Job(request.run).start()
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        wm.progress_begin(0, 100)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job, request = self._job, self._pending
+        if event.type == "ESC" and event.value == "PRESS":
+            job.cancel()
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        wm = context.window_manager
+        if not job.done:
+            context.workspace.status_text_set(f"Solving the hand of {request.source}: {job.message}, "
+                                              f"{100 * request.share:.0f} % ({job.elapsed:.1f} s) - Esc to cancel")
+            wm.progress_update(min(99, int(100 * request.share)))
+            return {"PASS_THROUGH"}
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+        if job.cancelled:
+            self.report({"WARNING"}, "Solve Hand cancelled; the scene is unchanged")
             return {"CANCELLED"}
-        collection = solved_hand_collection(context.scene, source,
-                                            f"{os.path.splitext(os.path.basename(source))[0]} hand")
-        arm = build_solved_hand(solved, collection)
-        report = solved.report()
-        self.report({"INFO"}, f"Solved {report['solved_frames']} of {report['frames']} frames: marker RMS "
-                              f"{report['marker_rms_mm']:.2f} mm, {report['frames_over_gate']} frames over the "
-                              f"{report['gate_mm']:g} mm gate ({arm.name})")
-        return {"FINISHED"}
+        if job.error is not None:
+            return self._fail(job.error, request.source)
+        return self._finish(context, request, job.result)
+
+
+classes = (MOCAPAL_OT_solve_hand,)

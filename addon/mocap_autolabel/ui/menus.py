@@ -21,6 +21,7 @@ class MOCAPAL_MT_mocap(bpy.types.Menu):
         layout.separator()
         layout.operator("mocap_autolabel.next_uncertain", text="Previous Uncertain", icon="TRIA_LEFT").previous = True
         layout.operator("mocap_autolabel.next_uncertain", text="Next Uncertain", icon="TRIA_RIGHT").previous = False
+        layout.operator("mocap_autolabel.jump_to_worst", icon="ERROR")
         layout.separator()
         layout.operator("mocap_autolabel.assign_label")
         layout.operator("mocap_autolabel.swap_labels")

@@ -45,6 +45,7 @@ class MOCAPAL_PT_label(_Sidebar, bpy.types.Panel):
         col = self.layout.column()
         col.use_property_split = True
         col.use_property_decorate = False
+        col.operator("mocap_autolabel.import_markers", text="Import Take", icon="IMPORT")
         col.prop(settings, "take")
         col.prop(settings, "layout")
         col.prop(settings, "layout_file")
@@ -84,6 +85,7 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("mocap_autolabel.next_uncertain", text="Previous", icon="TRIA_LEFT").previous = True
         row.operator("mocap_autolabel.next_uncertain", text="Next", icon="TRIA_RIGHT").previous = False
+        layout.operator("mocap_autolabel.jump_to_worst", text="Worst Frames", icon="ERROR")  # see the Timeline
         layout.template_list("MOCAPAL_UL_uncertain", "", settings, "uncertain", settings, "uncertain_index", rows=6)
         if settings.uncertain_total > len(settings.uncertain):
             layout.label(text=f"Showing the worst {len(settings.uncertain)} of {settings.uncertain_total}")

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -164,7 +164,8 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
               frames: int = 40, prior: float = 0.0005, iterations: int = 60, rounds: int = 3,
               solve_size: bool = True, reference: np.ndarray | None = None,
               reference_pose: np.ndarray | None = None,
-              contacts: Sequence[tuple[int, str]] = (), contact_after: int = 10) -> Calibration:
+              contacts: Sequence[tuple[int, str]] = (), contact_after: int = 10,
+              progress: Callable[[float], None] | None = None) -> Calibration:
     """Solve the performer's hand size and marker offsets from a labeled take.
 
     Args:
@@ -190,7 +191,10 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
             with the rest; the contact term pulls the two together (METHODS.md B, E_contact). Like a
             reference pose, it measures what a joint-angle bias would otherwise absorb.
         contact_after: iterations before the contact term switches on (the paper: 10).
+        progress: called with the share done (0-1) as the calibration goes (the first pose fit is
+            about a third of it, the rest its iterations); it may raise to stop it.
     """
+    tick = progress or (lambda _share: None)
     observed = np.asarray(observed, dtype=float)
     if observed.ndim != 3 or observed.shape[1] != len(layout) or observed.shape[2] != 3:
         raise ValueError(f"observed must be (frames, {len(layout)}, 3), got {observed.shape}")
@@ -201,7 +205,7 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
     candidates = _well_seen(observed)
     if len(candidates) > 60 * frames:  # plenty to choose varied poses from, at a bounded cost
         candidates = candidates[np.linspace(0, len(candidates) - 1, 60 * frames).astype(int)]
-    first = HandSolver(hand, placed).solve(observed[candidates])
+    first = HandSolver(hand, placed).solve(observed[candidates], progress=lambda done: tick(0.3 * done))
     ok = first.solved
     chosen = _diverse(first.poses[ok, 6:], frames)
     picked, poses = candidates[ok][chosen], first.poses[ok][chosen]
@@ -292,6 +296,7 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
             _, cost = residuals(poses, size, offsets, pads, touching)
         lam = 1e-3
         for it in range(iterations // rounds):
+            tick(0.3 + 0.7 * (round_ * (iterations // rounds) + it) / max(1, rounds * (iterations // rounds)))
             if not touching and len(pairs) and round_ * (iterations // rounds) + it >= contact_after:
                 touching = True
                 _, cost = residuals(poses, size, offsets, pads, touching)

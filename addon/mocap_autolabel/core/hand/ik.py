@@ -13,6 +13,7 @@ starts cold, from a few canonical poses aligned to the markers by Kabsch.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -246,7 +247,7 @@ class HandSolver:
         return self.refine(best, observed, self.cold_iterations)[0]
 
     def solve(self, observed: np.ndarray, rate: float | None = None, smooth_hz: float = 10.0,
-              initial: np.ndarray | None = None) -> Fit:
+              initial: np.ndarray | None = None, progress: Callable[[float], None] | None = None) -> Fit:
         """Fit every frame of ``observed (F, M, 3)`` (metres, NaN = missing, M = the binding's markers).
 
         Args:
@@ -254,6 +255,8 @@ class HandSolver:
                 (:func:`smooth_poses`), without it every frame keeps its own fit.
             smooth_hz: cut-off of that filter; 0 turns it off.
             initial: optional ``(26,)`` pose to warm-start the first frame from.
+            progress: called with the share of frames done (0-1) after each step; it may raise to
+                stop the solve (a cancelled job does).
         """
         observed = np.asarray(observed, dtype=float)
         n = len(observed)
@@ -293,6 +296,8 @@ class HandSolver:
                     fitted = np.where((keep & (old <= new))[:, None], poses[idx[cold]], fitted)
                 poses[idx[cold]] = fitted
             fit_rms[idx] = self.evaluate(poses[idx], observed[idx]).rms
+            if progress is not None:
+                progress((s + 1) / length)
         if rate:
             poses = smooth_poses(poses, rate, smooth_hz)
         return self.evaluate(poses, observed)

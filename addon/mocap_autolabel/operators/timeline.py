@@ -1,0 +1,57 @@
+"""Jump to the worst frames of the reviewed take (the bad-frames overview's first marker)."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import IntProperty
+
+from .review import reviewed_take
+
+
+class MOCAPAL_OT_jump_to_worst(bpy.types.Operator):
+    """Go to the frames that need a look most (uncertain samples and labels missing inside their span)
+    and select a marker that is uncertain there"""
+
+    bl_idname = "mocap_autolabel.jump_to_worst"
+    bl_label = "Jump to Worst Frames"
+    bl_options = {"REGISTER", "UNDO"}
+
+    rank: IntProperty(name="Rank", default=0, min=0, description="0: the worst run of frames, 1: the next...")
+
+    @classmethod
+    def poll(cls, context):
+        return reviewed_take(context) is not None
+
+    def execute(self, context):
+        import numpy as np
+
+        from ..blender.review import first_frame, load_state, object_for
+        from ..core.review import bad_runs, frame_trouble, uncertain_segments
+
+        coll = reviewed_take(context)
+        lab = load_state(coll).labeling
+        sure = context.scene.mocap_autolabel.sure
+        runs = bad_runs(lab, sure, self.rank + 1)
+        if len(runs) <= self.rank:
+            self.report({"INFO"}, "No frame needs a look: every label is confident and none is missing")
+            return {"CANCELLED"}
+        run = runs[self.rank]
+        uncertain, missing = frame_trouble(lab, sure)
+        peak = run.start + int(np.argmax((uncertain + missing)[run.start:run.stop]))
+        context.scene.frame_set(peak + first_frame(coll))
+        # Select the worst uncertain segment there, if any, so that Relabel acts on it.
+        unsure = uncertain_segments(lab, sure)
+        here = unsure[(lab.start[unsure] <= peak) & (lab.stop[unsure] > peak)]
+        obj = object_for(coll, lab, int(here[0])) if len(here) else None
+        if obj is not None and obj.name in context.view_layer.objects:
+            for other in context.selected_objects:
+                other.select_set(False)
+            obj.select_set(True)
+            context.view_layer.objects.active = obj
+        self.report({"INFO"}, f"Frame {peak + first_frame(coll)}: {uncertain[peak]} uncertain samples, "
+                              f"{missing[peak]} labels missing (frames {run.start + first_frame(coll)}-"
+                              f"{run.stop - 1 + first_frame(coll)})")
+        return {"FINISHED"}
+
+
+classes = (MOCAPAL_OT_jump_to_worst,)
