@@ -86,7 +86,8 @@ def test_messages_and_progress():
     assert describe(c, ["ThumbTip"], ["*0", "*1", "*2", "*3"], first=1) == "ThumbTip on *3, frames 100-1200"
     assert describe(Constraint(1, 0, 5, NULL), ["x"], ["*0", "pillow_top"]) == "unlabeled on pillow_top, frames 0-4"
     track = stage_progress(check_layout=False)
-    lines = [track(m) for m in ("packing frames", "scoring 10 frames with set", "temporal step: vote")]
-    assert [line for line, _ in lines][-1] == "temporal step: vote (stage 3 of 3)"
+    lines = [track(m) for m in ("finding hands", "packing frames", "scoring 10 frames with set",
+                                "temporal step: vote")]
+    assert [line for line, _ in lines][-1] == "temporal step: vote (stage 4 of 4)"
     shares = [d for _, d in lines]
     assert shares[0] == 0.0 and shares == sorted(shares) and shares[-1] < 1.0
