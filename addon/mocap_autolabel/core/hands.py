@@ -169,7 +169,7 @@ def _track_centres(pos: np.ndarray, valid: np.ndarray, ids: np.ndarray, m: int,
                 for h in range(2):
                     mine = x[lab == h]
                     if len(mine) >= 2:
-                        c[h] = np.median(mine, axis=0)
+                        c[h] = mine.mean(axis=0)
                         unseen[h] = 0
                     else:
                         unseen[h] += 1
@@ -178,6 +178,13 @@ def _track_centres(pos: np.ndarray, valid: np.ndarray, ids: np.ndarray, m: int,
             alive = unseen < lost_after
             centre[f] = np.where(alive[:, None], c, np.nan)
     return centre, joined
+
+
+def _spread(frames: np.ndarray, most: int) -> np.ndarray:
+    """At most ``most`` of ``frames``, evenly spread (a share over them needs no more)."""
+    if len(frames) <= most:
+        return frames
+    return frames[np.linspace(0, len(frames) - 1, most).astype(np.int64)]
 
 
 def _hand_gap(pos: np.ndarray, hand: np.ndarray, frames: np.ndarray) -> np.ndarray:
@@ -282,7 +289,7 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
     # ... and come apart now and then: one hand's points split in two always touch.
     sample_hand = np.full((frames, points), -1, dtype=np.int64)
     sample_hand[f_idx, p_idx] = np.where(keep, own, -1)
-    gap = _hand_gap(pos, sample_hand, np.flatnonzero(both_present))
+    gap = _hand_gap(pos, sample_hand, _spread(np.flatnonzero(both_present), 2000))
     apart = bool(len(gap)) and float(np.mean(gap >= APART)) >= PRESENT_FRAMES
     real = (share >= PRESENT_FRAMES) & crowded & (apart or hands == "2")
     info = {"present_share": [round(float(s), 4) for s in share],

@@ -40,8 +40,9 @@ class TwoHandConfig:
             never through each other.
         phase_s: length of a phase, drawn from this range; phases ease into each other over 0.3 s.
         close_share: share of the phases in which the hands are close (touch, clap, interlace, cross).
-        bury: a marker nearer than this to a marker of the other hand, while the hands are close,
-            is hidden (the other hand covers it) with probability ``bury_share``.
+        bury: a marker nearer than this to a marker of the other hand is hidden (the other hand
+            covers it) if it is one of the markers covered in that phase (each with probability
+            ``bury_share``, drawn once per phase).
         synth: each hand's generator settings (default: :class:`.generate.SynthConfig`, the
             realistic corruption of one-hand synthetic takes).
     """
@@ -76,11 +77,15 @@ def synthesize_two_hands(layout: Layout, frames: int, seed: int = 0, config: Two
     shift = _place(left.markers, right.markers, direction, centres, nearest, rate)
     right.markers = right.markers + shift[:, None, :]
     right.take = replace(right.take, positions=(right.take.positions + shift[:, None, :]).astype(np.float32))
-    # Markers buried in the other hand while the hands are close.
+    # Markers buried in the other hand while the hands are close: whether a marker is covered is
+    # drawn once per phase (a marker pressed into the other hand stays hidden, it does not flicker).
     a, b = left.markers, right.markers
     d = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=3)
-    buried = [(d.min(axis=2) < cfg.bury) & (rng.random(a.shape[:2]) < cfg.bury_share),
-              (d.min(axis=1) < cfg.bury) & (rng.random(b.shape[:2]) < cfg.bury_share)]
+    phase = np.zeros(frames, dtype=np.int64)
+    for k, (start, stop, _) in enumerate(phases):
+        phase[start:stop] = k
+    covered = rng.random((len(phases), 2, a.shape[1])) < cfg.bury_share
+    buried = [(d.min(axis=2) < cfg.bury) & covered[phase, 0], (d.min(axis=1) < cfg.bury) & covered[phase, 1]]
     for hand, hide in zip((left, right), buried):
         f, k = np.nonzero(hand.labels >= 0)
         gone = hide[f, hand.labels[f, k]]
