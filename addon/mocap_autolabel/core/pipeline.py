@@ -230,6 +230,27 @@ def _two_hand_scores(take: Take, layout: Layout, found: Hands, batch: FrameBatch
     return joint
 
 
+def _offer_nulls(found: Hands, labeling: Labeling, take: Take) -> int:
+    """Offer to both hands the samples of null segments whose trajectory went to one hand but
+    passes within :data:`.hands.HAND_RADIUS` of the other hand's centre; returns how many segments.
+    Changes ``found.both`` in place."""
+    from .hands import HAND_RADIUS
+
+    per = labeling.per_sample()
+    seg = labeling.segment_ids()
+    null = (per == NULL) & (found.hand >= 0) & ~found.both
+    f, p = np.nonzero(null)
+    other = 1 - found.hand[f, p].astype(np.int64)
+    centre = found.centre[f, other]
+    near = np.linalg.norm(take.positions[f, p] - centre, axis=1) < HAND_RADIUS  # NaN centre: not near
+    chosen = np.unique(seg[f[near], p[near]])
+    if not len(chosen):
+        return 0
+    offer = np.isin(seg, chosen) & null
+    found.both |= offer
+    return int(len(chosen))
+
+
 def _name_hands(take: Take, layout: Layout, labeling: Labeling, found: Hands, sides: Sequence[str] | None,
                 naming: HandNaming | None) -> Labeling:
     """Decide the sides of the hands, put the left hand's labels first and name them; facts in
@@ -424,6 +445,18 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     t = time.perf_counter()
     labeling = decide(scores)
     times["temporal"] = time.perf_counter() - t
+    if found.count == 2:
+        # A marker given to the wrong hand is one its labeler rejects: trajectories left null near
+        # the other hand are offered to both hands, and both are labeled again.
+        offered = _offer_nulls(found, labeling, take_in)
+        if offered:
+            say("temporal step: both hands again")
+            t = time.perf_counter()
+            scores = _apply_constraints(_two_hand_scores(take_in, layout, found, batch, labeler), slots, mask,
+                                        constraints)
+            labeling = decide(scores)
+            times["hands_again"] = time.perf_counter() - t
+        info["hands_offered_again"] = offered
     if validate:
         say("validating with the hand fit")
         t = time.perf_counter()
