@@ -213,6 +213,7 @@ def test_synth_two_hands_cli_label_and_solve(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "hands    2 hands: left" in printed and "truth" in printed
     assert {s for s, _ in split_hands(read_take(out), load_layout("han19"))} == {"left", "right"}
+    assert main(["info", str(out)]) == 0 and "hands    left and right han19 hands\n" in capsys.readouterr().out
     report = tmp_path / "solve.json"
     assert main(["solve", str(out), "--report", str(report), "--save-calibration", str(tmp_path / "c.json")]) == 0
     assert (tmp_path / "c_left.json").exists() and (tmp_path / "c_right.json").exists()

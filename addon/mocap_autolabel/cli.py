@@ -182,12 +182,11 @@ def _hands_line(labeling, confident: float = 0.95) -> str | None:
         return "one hand of two forced was found" if facts.get("forced") == 2 else None
     parts = []
     for h, side in enumerate(facts.get("sides", [])):
-        fit = ""
         m = len(labeling.names) // max(count, 1)
         part = labeling.label_range(h * m, (h + 1) * m) if count == 2 else labeling
         hand = part.summary(confident)
         parts.append(f"{side} {hand['labeled_segments']} segments, {100 * hand['confident_share']:.1f} % "
-                     f"confident{fit}")
+                     f"confident")
     forced = " (two forced, one found)" if facts.get("forced") == 2 else ""
     line = (f"{count} hand{'s' if count > 1 else ''}{forced}: " + "; ".join(parts)
             + f" (sides {100 * facts.get('confidence', 0):.0f} % sure)")
@@ -256,9 +255,30 @@ def _info(args) -> int:
               f"({summary['duration_s']:g} s)\n"
               f"  units    {summary['units']}\n"
               f"  missing  {summary['missing_percent']:.2f} %")
+        hands = _named_hands(take)
+        if hands:
+            print(f"  hands    {hands}")
         for warning in summary["warnings"]:
             print(f"  warning  {warning}")
     return status
+
+
+def _named_hands(take) -> str | None:
+    """The hands a labeled take's names hold, per built-in layout (``left and right han19 hands``),
+    or None."""
+    from .core.hands import hands_in_names
+    from .core.layout import builtin_layouts, load_layout
+
+    found = {}
+    for name in builtin_layouts():
+        layout = load_layout(name)
+        sides = [s for s in hands_in_names(take.names, layout) if s]
+        if sides:
+            found[name] = (set(layout.names), sides)
+    # A layout whose markers another found layout holds too (tips5 in han19) says nothing more.
+    kept = [n for n, (names, _) in found.items() if not any(names < other for other, _ in found.values())]
+    return ", ".join(f"{' and '.join(found[n][1])} {n} hand{'s' if len(found[n][1]) > 1 else ''}"
+                     for n in kept) or None
 
 
 def _bpy_or_none(what: str):

@@ -182,7 +182,7 @@ def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = N
     for conv in ([naming] if naming is not None else [HandNaming(k) for k in NAMINGS]):
         for side in SIDES:
             own.update(conv.names(side, layout))
-    out = np.array([not _unnamed(n) and n not in own for n in take.names], dtype=bool)
+    out = ~take.unlabeled & np.array([n not in own for n in take.names], dtype=bool)
     if not out.any():
         return None
     # Named points are a body around the hand only where the hand is left to label: a file whose
@@ -191,13 +191,6 @@ def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = N
     if np.median(offered[take.valid.any(axis=1)]) < len(layout) / 2:
         return None
     return out
-
-
-def _unnamed(name: str) -> bool:
-    """A slot name a capture system gives to a point it did not label (``*12``, ``Unlabeled 3``, empty)."""
-    n = name.strip()
-    return (not n or n.startswith("*") or n.lower().startswith(("unlabeled", "unnamed", "marker"))
-            or n.isdigit())
 
 
 def _two_hand_scores(take: Take, layout: Layout, found: Hands, batch: FrameBatch, labeler: Labeler) -> np.ndarray:
