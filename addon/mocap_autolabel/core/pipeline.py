@@ -193,40 +193,48 @@ def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = N
     return out
 
 
-def _two_hand_scores(take: Take, layout: Layout, found: Hands, batch: FrameBatch, labeler: Labeler) -> np.ndarray:
+def _two_hand_scores(take: Take, layout: Layout, found: Hands, batch: FrameBatch, labeler: Labeler,
+                     rows: np.ndarray | None = None, joint: np.ndarray | None = None) -> np.ndarray:
     """Joint per-frame scores ``(F, K, 2M + 1)`` of a two-hand take: each hand's points are scored by
     ``labeler`` on their own; a sample offered to both hands gets both, each at half the weight;
-    a sample of no hand is null."""
+    a sample of no hand is null. With ``rows`` (frame indices) and the ``joint`` scores of an
+    earlier call, only those frames are scored again (a copy of ``joint`` is returned)."""
     m = len(layout)
-    frames, k = batch.mask.shape
-    joint = np.full((frames, k, 2 * m + 1), _OTHER_HAND, dtype=np.float32)
-    joint[..., 2 * m] = 0.0
+    rows = np.arange(take.n_frames) if rows is None else np.asarray(rows)
+    mask, slots = batch.mask[rows], batch.slots[rows]
+    frames, k = mask.shape
+    part_joint = np.full((frames, k, 2 * m + 1), _OTHER_HAND, dtype=np.float32)
     column = np.full((frames, take.n_points), -1, dtype=np.int64)  # joint column of each (frame, slot)
-    f_idx, k_idx = np.nonzero(batch.mask)
-    column[f_idx, batch.slots[f_idx, k_idx]] = k_idx
+    f_idx, k_idx = np.nonzero(mask)
+    column[f_idx, slots[f_idx, k_idx]] = k_idx
     null = np.full((frames, k), -np.inf)
     cap = _cap(layout)
+    positions, both = take.positions[rows], found.both[rows]
     for h in range(2):
-        members = found.members(h)
-        part = _pack(replace_valid(take, members), cap)
+        members = found.members(h)[rows]
+        part = _pack(replace(take, positions=np.where(members[..., None], positions, np.nan).astype(np.float32),
+                             residuals=None), cap)
         scores = labeler.scores(part.points, part.mask)
         pf, pk = np.nonzero(part.mask)
         ps = part.slots[pf, pk]
         jk = column[pf, ps]
         ok = jk >= 0
         pf, pk, ps, jk = pf[ok], pk[ok], ps[ok], jk[ok]
-        weight = np.where(found.both[pf, ps], np.log(0.5), 0.0).astype(np.float32)
-        joint[pf, jk, h * m:(h + 1) * m] = scores[pf, pk, :m] + weight[:, None]
+        weight = np.where(both[pf, ps], np.log(0.5), 0.0).astype(np.float32)
+        part_joint[pf, jk, h * m:(h + 1) * m] = scores[pf, pk, :m] + weight[:, None]
         null[pf, jk] = np.logaddexp(null[pf, jk], scores[pf, pk, m] + weight)
-    offered = np.isfinite(null)
-    joint[..., 2 * m] = np.where(offered, null, 0.0)
+    part_joint[..., 2 * m] = np.where(np.isfinite(null), null, 0.0)
+    if joint is None:
+        return part_joint
+    joint = joint.copy()
+    joint[rows] = part_joint
     return joint
 
 
-def _offer_nulls(found: Hands, labeling: Labeling, take: Take) -> int:
+def _offer_nulls(found: Hands, labeling: Labeling, take: Take) -> tuple[int, np.ndarray]:
     """Offer to both hands the samples of null segments whose trajectory went to one hand but
-    passes within :data:`.hands.HAND_RADIUS` of the other hand's centre; returns how many segments.
-    Changes ``found.both`` in place."""
+    passes within :data:`.hands.HAND_RADIUS` of the other hand's centre; returns how many segments,
+    and the frames they hold (to score again). Changes ``found.both`` in place."""
     from .hands import HAND_RADIUS
 
     per = labeling.per_sample()
@@ -238,10 +246,10 @@ def _offer_nulls(found: Hands, labeling: Labeling, take: Take) -> int:
     near = np.linalg.norm(take.positions[f, p] - centre, axis=1) < HAND_RADIUS  # NaN centre: not near
     chosen = np.unique(seg[f[near], p[near]])
     if not len(chosen):
-        return 0
+        return 0, np.zeros(0, dtype=np.int64)
     offer = np.isin(seg, chosen) & null
     found.both |= offer
-    return int(len(chosen))
+    return int(len(chosen)), np.flatnonzero(offer.any(axis=1))
 
 
 def _name_hands(take: Take, layout: Layout, labeling: Labeling, found: Hands, sides: Sequence[str] | None,
@@ -395,7 +403,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     t = time.perf_counter()
     if found.count == 2:
         labeler = labeler or make_labeler(method, layout, model)
-        scores = _two_hand_scores(take_in, layout, found, batch, labeler)
+        joint = scores = _two_hand_scores(take_in, layout, found, batch, labeler)
     else:
         labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
         scores = labeler.scores(points, mask)
@@ -441,12 +449,12 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if found.count == 2:
         # A marker given to the wrong hand is one its labeler rejects: trajectories left null near
         # the other hand are offered to both hands, and both are labeled again.
-        offered = _offer_nulls(found, labeling, take_in)
+        offered, rows = _offer_nulls(found, labeling, take_in)
         if offered:
             say("temporal step: both hands again")
             t = time.perf_counter()
-            scores = _apply_constraints(_two_hand_scores(take_in, layout, found, batch, labeler), slots, mask,
-                                        constraints)
+            joint = _two_hand_scores(take_in, layout, found, batch, labeler, rows, joint)
+            scores = _apply_constraints(joint, slots, mask, constraints)
             labeling = decide(scores)
             times["hands_again"] = time.perf_counter() - t
         info["hands_offered_again"] = offered
