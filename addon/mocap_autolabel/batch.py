@@ -178,6 +178,20 @@ def _hand_frames(markers, believed=None) -> float:
     return float(((count >= markers.shape[1] / 2) & (reach <= HAND_REACH)).mean())
 
 
+def _worker_init() -> None:
+    """Undo in a spawned worker what the parent's ``import bpy`` did to the inherited ``sys.path``.
+
+    Importing the bpy module puts Blender's script folders first on ``sys.path``; one of them holds
+    Blender's pure-Python ``bpy`` package, which needs the ``_bpy`` built into the module. A spawned
+    worker starts with the parent's ``sys.path``, so its own ``import bpy`` found that package
+    before the module and failed with ``No module named '_bpy'``. Dropping those folders lets the
+    worker import the real module, which puts them back itself.
+    """
+    if "bpy" in sys.modules:  # bpy already imported (a forked worker): nothing to undo
+        return
+    sys.path[:] = [p for p in sys.path if not os.path.isfile(os.path.join(p or ".", "bpy", "__init__.py"))]
+
+
 def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
     """Label one take (and solve its hand) and write its outputs; never raises for a bad take.
 
@@ -263,10 +277,12 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
 
 def _blender_outputs(take, solved, stem: str, settings: BatchSettings) -> dict:
     from .blender.export import write_solved_scene
+    from .core.quiet import silenced_stdout
 
     paths = {kind: stem + "." + kind if on else None
              for kind, on in (("blend", settings.blend), ("fbx", settings.fbx), ("bvh", settings.bvh))}
-    written = write_solved_scene(take, solved, **paths)
+    with silenced_stdout():  # Blender's "Saved copy as .partial.blend" and the exporters' lines
+        written = write_solved_scene(take, solved, **paths)
     return {kind: os.path.basename(path) for kind, path in written.items()}
 
 
@@ -366,7 +382,7 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
         os.environ.update(env)  # spawned workers read these before numpy and onnxruntime start
         try:
             context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(settings.jobs, mp_context=context) as pool:
+            with ProcessPoolExecutor(settings.jobs, mp_context=context, initializer=_worker_init) as pool:
                 pending = {}
                 for path, name in todo:  # no "start" events: the pool decides when a take starts
                     pending[pool.submit(process_take, path, name, out_dir, settings)] = name

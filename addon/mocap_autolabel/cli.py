@@ -224,6 +224,7 @@ def _import(args) -> int:
     from .blender.export import save_blend
     from .blender.scene import ImportOptions, build_take
     from .core.atomic import atomic_output
+    from .core.quiet import silenced_stdout
     from .core.take import read_take
 
     try:
@@ -234,7 +235,8 @@ def _import(args) -> int:
     scene = bpy.context.scene
     options = ImportOptions(scale=args.scale, frame_offset=args.frame_offset, name_filter=args.names)
     collection = build_take(take, scene, options)
-    save_blend(args.blend)
+    with silenced_stdout():
+        save_blend(args.blend)
     summary = take.summary() | {
         "blend": os.path.abspath(args.blend),
         "collection": collection.name,
@@ -258,6 +260,7 @@ def _label(args) -> int:
     from .core.labeling import labeled_take, layout_markers
     from .core.layout import load_layout
     from .core.pipeline import label_take, layout_doubt, time_limit_warning
+    from .core.quiet import silenced_stdout
     from .core.synth.generate import load_truth, truth_path
     from .core.take import read_take
 
@@ -310,7 +313,8 @@ def _label(args) -> int:
         if args.blend:
             from .blender.export import write_review_scene
 
-            write_review_scene(take, args.layout, labeling, args.blend, args.method, args.temporal, solved)
+            with silenced_stdout():  # Blender's "Saved copy as .partial.blend": we say what we wrote
+                write_review_scene(take, args.layout, labeling, args.blend, args.method, args.temporal, solved)
     except Exception as exc:
         return _fail(args.file, exc)
     summary = labeling.summary()
@@ -414,9 +418,12 @@ def _solve(args) -> int:
         print(f"  calibration {args.save_calibration}")
     if bpy is not None:
         from .blender.export import write_solved_scene
+        from .core.quiet import silenced_stdout
 
         try:  # the labeled markers beside the calibrated, animated rig; then .blend, FBX and BVH
-            for kind, path in write_solved_scene(take, solved, args.blend, args.fbx, args.bvh).items():
+            with silenced_stdout():  # Blender's and the exporters' own lines name the temporary files
+                written = write_solved_scene(take, solved, args.blend, args.fbx, args.bvh)
+            for kind, path in written.items():
                 print(f"  {kind:8s} {path}")
         except Exception as exc:
             return _fail(args.file, exc)
@@ -544,6 +551,7 @@ def _synth_blend(synth, path: str) -> int:
     from .blender.armature import build_hand, key_poses
     from .blender.export import save_blend
     from .blender.scene import ImportOptions, build_take
+    from .core.quiet import silenced_stdout
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
@@ -552,7 +560,8 @@ def _synth_blend(synth, path: str) -> int:
     scene.collection.children.link(truth)
     objs = build_hand(synth.hand, name="TrueHand", collection=truth, layout=synth.layout)
     key_poses(objs["armature"], synth.hand, synth.poses, first_frame=synth.take.first_frame)
-    save_blend(path)
+    with silenced_stdout():
+        save_blend(path)
     print(f"  blend    {path}")
     return EXIT_OK
 
