@@ -487,3 +487,35 @@ def test_a_labeling_that_finishes_after_an_edit_is_refused(labeled):
     with pytest.raises(ValueError, match="changed while the labeling ran"):
         finish_label(bpy.context.scene, coll, request, result)
     assert state(coll).review.constraints == edited.review.constraints
+
+
+def test_label_a_body_take_is_an_error_and_builds_nothing(empty_scene, bpy_module):
+    """The CLI's and batch's no-hand rule: a body capture used to be labeled with 'finger' names and
+    FINISHED ('5 / 19 labels, 0.0 % confident'); now one ERROR line and no labeled collection."""
+    from conftest import data_path
+
+    bpy = bpy_module
+    bpy.ops.mocap_autolabel.import_markers(filepath=str(data_path("c3d", "ezc3d-testFiles", "Vicon.c3d")))
+    coll = empty_scene.mocap_autolabel.take
+    before = set(bpy.data.collections.keys())
+    with pytest.raises(RuntimeError, match=r"Vicon: no hand found: only 0 % of frames have half of the han19"):
+        bpy.ops.mocap_autolabel.label()
+    assert set(bpy.data.collections.keys()) == before and "mocap_labeled" not in coll.keys()
+
+
+def test_label_warns_when_the_vote_hit_its_time_limit(empty_scene, bpy_module, take_file, monkeypatch, capfd):
+    """As the CLI and batch do ('the vote's exclusive assignment stopped at its 3 s limit')."""
+    from mocap_autolabel.core import pipeline
+
+    real = pipeline.label_take
+
+    def hurried(*args, **kwargs):  # a hand take never reaches the limit: say it did
+        labeling = real(*args, **kwargs)
+        labeling.info["time_limited"] = 2
+        return labeling
+
+    monkeypatch.setattr(pipeline, "label_take", hurried)
+    bpy_module.ops.mocap_autolabel.import_markers(filepath=str(take_file))
+    assert bpy_module.ops.mocap_autolabel.label() == {"FINISHED"}
+    out = capfd.readouterr()
+    assert "stopped at its 3 s limit 2 time(s)" in out.out + out.err

@@ -144,3 +144,18 @@ def test_train_command_writes_a_model_and_card(tmp_path, capsys):
     card = json.loads((tmp_path / "tips3.json").read_text())
     assert card["layout"]["name"] == "tips3" and card["method"] == "set"
     assert main(["label", str(ROOT / "samples" / "demo_take.c3d"), "--layout", "tips3", "--model", str(out)]) == 0
+
+
+@pytest.mark.parametrize("parts", [("c3d", "ezc3d-testFiles", "Vicon.c3d"),
+                                   ("c3d", "auto-marker-label", "data", "S01_Pronetokneel01_mksrem.c3d")])
+def test_label_a_body_take_fails_with_batchs_no_hand_rule(parts, capsys, tmp_path):
+    """Body captures (no hand) used to exit 0 with body markers named as fingers; now the CLI applies
+    batch's rule: one error line, exit 1, nothing written."""
+    path = str(data_path(*parts))
+    out, report = tmp_path / "labeled.c3d", tmp_path / "report.json"
+    assert main(["label", path, "-o", str(out), "--report", str(report)]) == 1
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {path}: no hand found: only ")
+    assert "of the han19 markers labeled" in lines[0] and "unexpected" not in lines[0]
+    assert not out.exists() and not report.exists() and not captured.out

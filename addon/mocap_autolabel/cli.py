@@ -257,9 +257,10 @@ def _label(args) -> int:
     import numpy as np
 
     from .core.atomic import atomic_output
+    from .core.errors import MocapInputError
     from .core.labeling import labeled_take, layout_markers
     from .core.layout import load_layout
-    from .core.pipeline import label_take, layout_doubt, time_limit_warning
+    from .core.pipeline import check_hand, label_take, layout_doubt, time_limit_warning
     from .core.quiet import silenced_stdout
     from .core.synth.generate import load_truth, truth_path
     from .core.take import read_take
@@ -299,6 +300,9 @@ def _label(args) -> int:
                               fit=labeled if args.method == "gmm" else None,
                               start=labeled[0] if (labeled is not None and args.method == "nearest") else None)
         doubt = layout_doubt(take, layout, labeling)
+        hand = check_hand(take, layout, labeling, doubt)
+        if not hand.found:  # batch's rule: labels on a body capture are not a hand, whatever their count
+            raise MocapInputError(args.file, str(hand))
         if doubt:
             labeling.info["layout_doubt"] = asdict(doubt)  # in the report, and in the review scene's panel
         if args.output:

@@ -414,14 +414,19 @@ class LabelRequest:
     def run(self, say=None, check_layout: bool = False) -> Labeling:
         """The labeling; with ``check_layout``, ``info["layout_doubt"]`` (a :class:`LayoutDoubt` as a
         dict) says when another layout fits the take clearly better (a re-solve keeps what the
-        labeling it replaces said)."""
-        from ..core.pipeline import label_take, layout_doubt
+        labeling it replaces said), and a take in which no hand is found (the CLI's and batch's
+        rule, :func:`.core.pipeline.check_hand`) raises :class:`MocapInputError`: nothing is built."""
+        from ..core.errors import MocapInputError
+        from ..core.pipeline import check_hand, label_take, layout_doubt
 
         labeling = label_take(self.take, self.layout, method=self.method, temporal=self.temporal,
                               constraints=self.review.constraints, splits=self.review.splits,
                               labeler=self.labeler, progress=say)
         if check_layout:
             doubt = layout_doubt(self.take, self.layout, labeling)
+            hand = check_hand(self.take, self.layout, labeling, doubt)
+            if not hand.found:
+                raise MocapInputError(self.take_name, str(hand))
             doubt = asdict(doubt) if doubt else None
         else:
             doubt = self.previous.info.get("layout_doubt") if self.previous is not None else None

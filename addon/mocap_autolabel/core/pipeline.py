@@ -399,6 +399,82 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
     return LayoutDoubt(layout.name, float(share), best, float(shares[best]))
 
 
+#: A hand is "found" when at least this share of frames has at least half the layout labeled, all
+#: within HAND_REACH (metres) of their median: a hand is about 0.2 m long, a body capture labeled
+#: as a hand spreads its "labels" over half a metre or more.
+HAND_FRAMES, HAND_REACH = 0.3, 0.25
+#: A labeled marker counts towards "a hand is here" only if its segment's mean per-frame
+#: probability is at least this: a full-body capture labeled with a hand layout gets labels, but
+#: ones its labeler does not believe (median 0.26 on ezc3d's Vicon.c3d; 0.98 and up on hands).
+BELIEVED = 0.5
+
+
+@dataclass(frozen=True)
+class HandCheck:
+    """Whether a labeled take holds a hand: ``share`` of its frames look like one (see
+    :data:`HAND_FRAMES`); ``better`` names a layout that fits clearly better, if one does.
+    ``str()`` of a failed check is the one-line reason, for errors in the CLI, batch and Blender."""
+
+    share: float
+    layout: str
+    better: str | None = None
+
+    @property
+    def found(self) -> bool:
+        return self.share >= HAND_FRAMES
+
+    def __str__(self) -> str:
+        if self.found:
+            return f"a hand in {100 * self.share:.0f} % of frames"
+        hint = (f"'{self.better}' fits better: use --layout {self.better}" if self.better else
+                f"is this a {self.layout} take?")
+        return (f"no hand found: only {100 * self.share:.0f} % of frames have half of the {self.layout} markers "
+                f"labeled with some confidence within {HAND_REACH:g} m of each other ({hint})")
+
+
+def _believed(labeling: Labeling, m: int) -> np.ndarray:
+    """bool ``(F, M)``: where each label sits on a segment whose mean probability reaches :data:`BELIEVED`."""
+    seg = labeling.segment_ids()  # (F, P)
+    frame, slot = np.nonzero(seg >= 0)
+    s = seg[frame, slot]
+    keep = (labeling.label[s] >= 0) & (labeling.evidence[s, 0] >= BELIEVED)
+    out = np.zeros((labeling.n_frames, m), dtype=bool)
+    out[frame[keep], labeling.label[s[keep]]] = True
+    return out
+
+
+def hand_share(markers: np.ndarray, believed: np.ndarray | None = None) -> float:
+    """Share of frames whose labeled markers ``(F, M, 3)`` (metres, NaN = not labeled) look like one
+    hand: at least half of the M labeled, all within :data:`HAND_REACH` of their median.
+    ``believed`` ``(F, M)`` bool keeps only those markers (see :data:`BELIEVED`)."""
+    import warnings
+
+    if believed is not None:
+        markers = np.where(believed[..., None], markers, np.nan)
+    if not len(markers):
+        return 0.0
+    count = np.isfinite(markers[..., 0]).sum(axis=1)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # frames with no labeled marker
+        centre = np.nanmedian(markers, axis=1, keepdims=True)
+        reach = np.nanmax(np.linalg.norm(markers - centre, axis=2), axis=1)
+    return float(((count >= markers.shape[1] / 2) & (reach <= HAND_REACH)).mean())
+
+
+def check_hand(take: Take, layout: Layout, labeling: Labeling, doubt: LayoutDoubt | None = None,
+               labeled: Take | None = None) -> HandCheck:
+    """The no-hand rule the CLI, batch and Blender share: a labeling of ``take`` in which under
+    :data:`HAND_FRAMES` of the frames hold half of ``layout``'s markers, believed and within
+    :data:`HAND_REACH` of each other, found no hand (a body capture, a prop, the wrong layout),
+    however many labels it gave. ``doubt`` (from :func:`layout_doubt`) names the better layout;
+    ``labeled``, ``labeled_take(take, labeling)`` where the caller has it already."""
+    from .labeling import labeled_take
+
+    m = len(layout)
+    markers = (labeled if labeled is not None else labeled_take(take, labeling)).positions[:, :m]
+    return HandCheck(hand_share(markers, _believed(labeling, m)), layout.name, doubt.better if doubt else None)
+
+
 @dataclass
 class HandSolve:
     """A hand solved over a labeled take.
