@@ -159,3 +159,51 @@ def test_label_a_body_take_fails_with_batchs_no_hand_rule(parts, capsys, tmp_pat
     assert len(lines) == 1 and lines[0].startswith(f"error: {path}: no hand found: only ")
     assert "of the han19 markers labeled" in lines[0] and "unexpected" not in lines[0]
     assert not out.exists() and not report.exists() and not captured.out
+
+
+def test_label_without_outputs_says_that_nothing_was_written(capsys):
+    assert main(["label", str(ROOT / "samples" / "demo_take.c3d")]) == 0
+    out = capsys.readouterr().out
+    assert "  output   none written: give -o OUT.c3d" in out
+
+
+def test_label_and_solve_progress_bar_on_stderr_only_when_shown(capsys, monkeypatch, tmp_path):
+    from mocap_autolabel import cli
+
+    monkeypatch.setattr(cli._ProgressBar, "DELAY", 0.0)  # the demo take is short: draw from the start
+    demo = str(ROOT / "samples" / "demo_take.c3d")
+    out = tmp_path / "labeled.c3d"
+    assert main(["label", demo, "-o", str(out), "--progress"]) == 0
+    captured = capsys.readouterr()
+    assert "scoring 1200 frames with set" in captured.err and "] 100 %" in captured.err
+    assert "%  scoring" not in captured.out  # the results alone on stdout
+    assert main(["label", demo, "--progress", "--quiet"]) == 2  # one or the other
+    capsys.readouterr()
+    for quiet in (["--quiet"], []):  # --quiet, or not a terminal (pytest's capture) and not asked
+        assert main(["label", demo] + quiet) == 0
+        assert "scoring" not in capsys.readouterr().err
+    assert main(["solve", str(out), "--progress"]) == 0
+    assert "calibrating and solving the hand" in capsys.readouterr().err
+
+
+def test_foreseeable_failures_say_what_is_wrong_in_one_line(capsys, tmp_path):
+    demo = str(ROOT / "samples" / "demo_take.c3d")
+    assert main(["label", demo, "--report", str(tmp_path), "--quiet"]) == 1
+    assert capsys.readouterr().err.strip() == f"error: {tmp_path}: is a folder; give a file name for the report"
+    vicon = str(data_path("c3d", "ezc3d-testFiles", "Vicon.c3d"))
+    assert main(["label", vicon, "--validate", "--quiet"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"error: {vicon}: IK validation: no frame has 4 or more han19 markers labeled")
+    assert "unexpected" not in err and len(err.splitlines()) == 1
+
+
+def test_blenders_own_save_lines_stay_out_of_the_output(tmp_path):
+    """bpy's 'Info: Saved copy as ".x.1a2b.partial.blend"' named a temporary file the user never sees."""
+    pytest.importorskip("bpy", reason="the bpy module (pip install bpy==5.0.1) is not installed")
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "addon"))
+    blend = tmp_path / "review.blend"
+    done = subprocess.run([sys.executable, "-m", "mocap_autolabel", "label", str(ROOT / "samples" / "demo_take.c3d"),
+                           "--blend", str(blend), "--quiet"], capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert blend.is_file() and f"  review   {blend}" in done.stdout
+    assert "partial" not in done.stdout + done.stderr and "Saved copy" not in done.stdout + done.stderr

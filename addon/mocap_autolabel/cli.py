@@ -26,6 +26,82 @@ class _UsageError(Exception):
     pass
 
 
+class _ProgressBar:
+    """Progress of one long command (``label``, ``solve``) on stderr: stage, share done, seconds.
+
+    Drawn on a terminal, or anywhere when asked (``--progress``), never with ``--quiet``; it
+    appears only once the work has run for :attr:`DELAY` seconds, so short takes print nothing
+    extra. On a terminal one line is redrawn in place and wiped at the end (stdout keeps only the
+    results); elsewhere (a log) a line is written per stage and per tenth of the work.
+
+    Call it as ``bar(message)`` at each stage (``label_take(progress=...)``), ``bar.share(x)``
+    with the share done, 0 to 1 (``label_take(done=...)``), or ``bar(message, share)``.
+    """
+
+    DELAY = 1.0  # seconds before anything is drawn
+    WIDTH = 24
+
+    def __init__(self, shown: bool, stream=None) -> None:
+        import time
+
+        self.stream = stream or sys.stderr
+        self.shown = shown
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.clock = time.perf_counter
+        self.start = self.clock()
+        self.message, self.done = "", None
+        self.drawn_at = -1.0
+        self.logged: tuple[str, int] | None = None
+        self.visible = False
+
+    @classmethod
+    def for_args(cls, args) -> _ProgressBar:
+        return cls(not args.quiet and (args.progress or sys.stderr.isatty()))
+
+    def __call__(self, message: str, share: float | None = None) -> None:
+        self.message = message
+        if share is not None:
+            self.done = share
+        self._draw(force=True)
+
+    def stage(self, message: str, share: float | None = None) -> None:
+        """A new stage whose share done is ``share`` (None: not known, only the seconds show)."""
+        self.done = None
+        self(message, share)
+
+    def share(self, share: float) -> None:
+        self.done = share
+        self._draw()
+
+    def _draw(self, force: bool = False) -> None:
+        now = self.clock()
+        elapsed = now - self.start
+        if not self.shown or elapsed < self.DELAY or (not force and now - self.drawn_at < 0.1):
+            return
+        self.drawn_at = now
+        part = min(max(self.done or 0.0, 0.0), 1.0)
+        filled = int(self.WIDTH * part)
+        bar = f"[{'#' * filled}{'.' * (self.WIDTH - filled)}] {100 * part:3.0f} %" if self.done is not None else ""
+        line = f"{bar}  {self.message}  {elapsed:.1f} s".strip()
+        if self.tty:
+            self.stream.write("\r" + line[:119].ljust(119))
+            self.visible = True
+        else:
+            key = (self.message, int(10 * part))
+            if key == self.logged:
+                return
+            self.logged = key
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        """Wipe the bar's line (a terminal) so that the results start on a clean line."""
+        if self.visible:
+            self.stream.write("\r" + " " * 119 + "\r")
+            self.stream.flush()
+            self.visible = False
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="mocap_autolabel", description="Automatic labeling of optical hand motion capture.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
@@ -88,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "(open it in Blender with the add-on: Mocap tab > Review); needs Blender or bpy")
     lab.add_argument("--solve-hand", action="store_true",
                      help="also fit the hand to the labels and put the keyed rig in --blend")
+    _progress_flags(lab)
 
     sol = sub.add_parser("solve", help="fit the rigged hand to a labeled take: calibration, IK, Blender/FBX/BVH")
     sol.add_argument("file", metavar="FILE", help="a labeled take (C3D, TRC or TSV) with the layout's marker names")
@@ -109,6 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
     sol.add_argument("--side", choices=("left", "right"), help="hand side (default: detected)")
     sol.add_argument("--smooth-hz", type=float, default=10.0, help="low-pass cut-off of the pose track (0: off)")
     sol.add_argument("--report", metavar="REPORT.json", help="per-frame and overall marker RMS (mm), calibration")
+    _progress_flags(sol)
 
     bat = sub.add_parser("batch", help="label (and solve) folders of takes headless, with progress and reports")
     bat.add_argument("inputs", nargs="+", metavar="INPUT", help="take files, folders (searched recursively) or globs")
@@ -139,6 +217,13 @@ def build_parser() -> argparse.ArgumentParser:
     trn.add_argument("--steps", type=int, help="training steps (default: the shipped recipe's)")
     trn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     return parser
+
+
+def _progress_flags(parser: argparse.ArgumentParser) -> None:
+    shown = parser.add_mutually_exclusive_group()
+    shown.add_argument("--progress", action="store_true",
+                       help="show the progress bar (stderr) also when it is not a terminal")
+    shown.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -172,6 +257,8 @@ def _fail(path: str, exc: BaseException) -> int:
 
     if isinstance(exc, MocapInputError):
         print(f"error: {exc}", file=sys.stderr)
+    elif isinstance(exc, OSError) and exc.strerror:  # a file that cannot be read or written: say which
+        print(f"error: {exc.filename or path}: {exc.strerror}", file=sys.stderr)
     else:
         print(f"error: {path}: unexpected {type(exc).__name__}: {exc}", file=sys.stderr)
     return EXIT_FAILED
@@ -284,8 +371,10 @@ def _label(args) -> int:
         return EXIT_USAGE
     if args.blend and _bpy_or_none("label --blend") is None:
         return EXIT_USAGE
+    bar = _ProgressBar.for_args(args)
     try:
         layout = load_layout(args.layout)
+        bar(f"reading {args.file}")
         take = read_take(args.file)
         labeled = layout_markers(read_take(args.fit), layout) if args.fit else None
         hand = None
@@ -298,7 +387,9 @@ def _label(args) -> int:
                               score=args.vote, p=args.p, q=args.q, n_best=args.n_best,
                               validate=args.validate, hand=hand,
                               fit=labeled if args.method == "gmm" else None,
-                              start=labeled[0] if (labeled is not None and args.method == "nearest") else None)
+                              start=labeled[0] if (labeled is not None and args.method == "nearest") else None,
+                              progress=bar, done=bar.share)
+        bar("checking the layout and the hand", 1.0)
         doubt = layout_doubt(take, layout, labeling)
         hand = check_hand(take, layout, labeling, doubt)
         if not hand.found:  # batch's rule: labels on a body capture are not a hand, whatever their count
@@ -308,19 +399,24 @@ def _label(args) -> int:
         if args.output:
             from .core.formats.c3d import write_c3d
 
+            bar(f"writing {args.output}")
             write_c3d(labeled_take(take, labeling), args.output)
         solved = None
         if args.solve_hand:
             from .core.pipeline import solve_take
 
-            solved = solve_take(labeled_take(take, labeling), layout)
+            bar.stage("solving the hand")
+            solved = solve_take(labeled_take(take, labeling), layout, **_solve_progress(bar))
         if args.blend:
             from .blender.export import write_review_scene
 
+            bar(f"writing {args.blend}")
             with silenced_stdout():  # Blender's "Saved copy as .partial.blend": we say what we wrote
                 write_review_scene(take, args.layout, labeling, args.blend, args.method, args.temporal, solved)
     except Exception as exc:
+        bar.close()
         return _fail(args.file, exc)
+    bar.close()
     summary = labeling.summary()
     seconds = labeling.info["seconds"]["total"]
     print(f"{args.file}: {args.method} + {args.temporal} on {layout.name}, {take.n_frames} frames in {seconds:.2f} s "
@@ -348,20 +444,31 @@ def _label(args) -> int:
     if args.blend:
         hand = f" and the solved hand (marker RMS {solved.fit.overall_rms() * 1000:.2f} mm)" if solved else ""
         print(f"  review   {args.blend}: labeled markers coloured by confidence{hand}")
-    if args.report:
-        with atomic_output(args.report) as tmp, open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(report, fh, indent=1)
-        print(f"  report   {args.report}")
-    if args.labels:
-        with atomic_output(args.labels) as tmp, open(tmp, "wb") as fh:
-            np.savez_compressed(fh, labels=labeling.per_sample(), confidence=labeling.per_sample_confidence(),
-                                names=np.array(layout.names))
-        print(f"  labels   {args.labels}")
+    try:
+        if args.report:
+            _write_report(args.report, report)
+        if args.labels:
+            with atomic_output(args.labels) as tmp, open(tmp, "wb") as fh:
+                np.savez_compressed(fh, labels=labeling.per_sample(), confidence=labeling.per_sample_confidence(),
+                                    names=np.array(layout.names))
+            print(f"  labels   {args.labels}")
+    except OSError as exc:
+        return _fail(args.file, exc)
+    if not (args.output or args.blend or args.report or args.labels):
+        print("  output   none written: give -o OUT.c3d for the labeled take (or --report, --labels, --blend)")
     return EXIT_OK
 
 
+def _solve_progress(bar: _ProgressBar) -> dict:
+    """``solve_take``'s progress argument where it has one (stage and share done, 0 to 1)."""
+    import inspect
+
+    from .core.pipeline import solve_take
+
+    return {"progress": bar} if "progress" in inspect.signature(solve_take).parameters else {}
+
+
 def _solve(args) -> int:
-    from .core.atomic import atomic_output
     from .core.errors import MocapInputError
     from .core.hand.calibrate import Calibration
     from .core.layout import load_layout
@@ -397,16 +504,22 @@ def _solve(args) -> int:
         bpy = _bpy_or_none("solve --blend/--fbx/--bvh")
         if bpy is None:
             return EXIT_FAILED
+    bar = _ProgressBar.for_args(args)
     try:
         layout = load_layout(args.layout)
         calibration = Calibration.load(args.calibration) if args.calibration else None
+        bar.stage(f"reading {args.file}")
         take = read_take(args.file)
         if reference is not None and reference.stop > take.n_frames:
             raise MocapInputError(args.file, f"has {take.n_frames} frames; --reference-frames ends at {reference.stop}")
+        bar.stage("calibrating and solving the hand" if calibration is None else "solving the hand")
         solved = solve_take(take, layout, calibration=calibration, calibrate_seconds=args.calibrate_seconds,
-                            reference=reference, contacts=contacts, side=args.side, smooth_hz=args.smooth_hz)
+                            reference=reference, contacts=contacts, side=args.side, smooth_hz=args.smooth_hz,
+                            **_solve_progress(bar))
     except Exception as exc:
+        bar.close()
         return _fail(args.file, exc)
+    bar.close()
     report = solved.report() | {"file": args.file}
     cal = solved.calibration
     fps = take.n_frames / max(solved.seconds["solve"], 1e-9)
@@ -432,10 +545,22 @@ def _solve(args) -> int:
         except Exception as exc:
             return _fail(args.file, exc)
     if args.report:
-        with atomic_output(args.report) as tmp, open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(report, fh, indent=1)
-        print(f"  report   {args.report}")
+        try:
+            _write_report(args.report, report)
+        except OSError as exc:
+            return _fail(args.file, exc)
     return EXIT_OK
+
+
+def _write_report(path: str, report: dict) -> None:
+    """``report`` as JSON at ``path``, whole or not at all (a folder or unwritable path raises OSError)."""
+    from .core.atomic import atomic_output
+
+    if os.path.isdir(path):  # else the rename fails with a confusing temporary name in the message
+        raise IsADirectoryError(21, "is a folder; give a file name for the report", path)
+    with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(report, fh, indent=1)
+    print(f"  report   {path}")
 
 
 def _batch(args) -> int:
