@@ -90,10 +90,13 @@ def _crossings(take: Take) -> dict[int, list[int]]:
 def _labeler(method: str, layout: Layout, model, fit: np.ndarray | None, start: np.ndarray | None, take: Take,
              batch):
     if method == "gmm":
-        if fit is None:
-            raise MocapInputError(take.source, "the gmm method needs a labeled take of the subject to fit on")
+        if fit is None:  # no take of the performer: the layout's synthetic range of motion stands in
+            return _matched_side(_rom_gmm(layout), batch)
         lab = make_labeler("gmm", layout)
-        lab.fit(fit)
+        try:
+            lab.fit(fit)
+        except ValueError as exc:  # the fitting take lacks what the GMMs need (the rigid triangle, samples)
+            raise MocapInputError("--fit", f"cannot fit gmm on this labeled take: {exc}") from None
         return lab
     if method == "nearest":
         if start is None:  # seed the tracker with our own labels of the first frame that has points
@@ -106,6 +109,48 @@ def _labeler(method: str, layout: Layout, model, fit: np.ndarray | None, start: 
             start[labels[0][ok]] = batch.points[first][ok]
         return make_labeler("nearest", layout, start=start)
     return make_labeler(method, layout, model)
+
+
+#: ``gmm`` labelers fitted on a layout's synthetic range of motion, by layout name and content: a
+#: fit takes seconds, and batch runs and Blender re-solves label many takes with one layout.
+_ROM_GMMS: dict[tuple[str, str], Labeler] = {}
+#: A range-of-motion fit covers several hand sizes (:data:`.synth.generate.ROM_HANDS`): the
+#: back-of-hand triangle it finds may differ from its median by this much (metres, summed over the
+#: three sides) instead of the 12 mm a fit on the performer's own take allows.
+ROM_TOLERANCE = 0.03
+
+
+def _rom_gmm(layout: Layout) -> Labeler:
+    """A right-hand ``gmm`` labeler fitted on ``layout``'s synthetic range of motion (cached)."""
+    from .synth.generate import range_of_motion
+
+    key = (layout.name, repr(layout.names))
+    if key not in _ROM_GMMS:
+        lab = make_labeler("gmm", layout)
+        lab.tolerance = ROM_TOLERANCE
+        _ROM_GMMS[key] = lab.fit(range_of_motion(layout, side="right"))
+    return _ROM_GMMS[key]
+
+
+class _Mirrored(Labeler):
+    """Another labeler's scores of the take mirrored in x: a left hand mirrored is a right hand
+    (the model's hands are exact mirrors), so one right-hand fit serves both."""
+
+    def __init__(self, inner: Labeler) -> None:
+        self.inner, self.layout, self.name = inner, inner.layout, inner.name
+
+    def scores(self, points: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        return self.inner.scores(points * np.array([-1.0, 1.0, 1.0], dtype=points.dtype), mask)
+
+
+def _matched_side(labeler: Labeler, batch: FrameBatch, sample: int = 200) -> Labeler:
+    """``labeler`` (fitted on a right hand) as it is or mirrored, whichever labels more of up to
+    ``sample`` frames spread over the take: the side of the hand is not known before labeling."""
+    rows = np.unique(np.linspace(0, len(batch.mask) - 1, min(sample, len(batch.mask))).astype(int))
+    points, mask = batch.points[rows], batch.mask[rows]
+    mirrored = _Mirrored(labeler)
+    found = [(assign(lab.scores(points, mask), mask)[0] >= 0).sum() for lab in (labeler, mirrored)]
+    return mirrored if found[1] > found[0] else labeler
 
 
 def _apply_constraints(scores: np.ndarray, slots: np.ndarray, mask: np.ndarray,
@@ -344,6 +389,8 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, layout: Layout, m
         labeling.confidence = calibration(labeling.evidence, labeled=labeling.label >= 0)
     labeling.confidence[labeling.locked] = 1.0
     info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
+    if calibration is not None and calibration.never_sure:
+        info["never_confident"] = True  # front ends say why every segment is uncertain
     return labeling
 
 
