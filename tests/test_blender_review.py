@@ -519,3 +519,13 @@ def test_label_warns_when_the_vote_hit_its_time_limit(empty_scene, bpy_module, t
     assert bpy_module.ops.mocap_autolabel.label() == {"FINISHED"}
     out = capfd.readouterr()
     assert "stopped at its 3 s limit 2 time(s)" in out.out + out.err
+
+
+def test_gmm_labels_in_blender_without_a_fit_take(empty_scene, bpy_module, take_file):
+    """gmm always failed in the panel (it had no field for the labeled take it fits on); it now fits
+    on the layout's synthetic range of motion."""
+    bpy_module.ops.mocap_autolabel.import_markers(filepath=str(take_file))
+    settings = empty_scene.mocap_autolabel
+    settings.method = "gmm"
+    assert bpy_module.ops.mocap_autolabel.label() == {"FINISHED"}
+    assert state(settings.take).labeling.info["method"] == "gmm"
