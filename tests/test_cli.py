@@ -186,10 +186,10 @@ def test_label_and_solve_progress_bar_on_stderr_only_when_shown(capsys, monkeypa
 
 def test_foreseeable_failures_say_what_is_wrong_in_one_line(capsys, tmp_path):
     demo = str(ROOT / "samples" / "demo_take.c3d")
-    assert main(["label", demo, "--report", str(tmp_path), "--quiet"]) == 1
+    assert main(["label", demo, "--report", str(tmp_path)]) == 1
     assert capsys.readouterr().err.strip() == f"error: {tmp_path}: is a folder; give a file name for the report"
     vicon = str(data_path("c3d", "ezc3d-testFiles", "Vicon.c3d"))
-    assert main(["label", vicon, "--validate", "--quiet"]) == 1
+    assert main(["label", vicon, "--validate"]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"error: {vicon}: IK validation: no frame has 4 or more han19 markers labeled")
     assert "unexpected" not in err and len(err.splitlines()) == 1
@@ -201,7 +201,7 @@ def test_blenders_own_save_lines_stay_out_of_the_output(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "addon"))
     blend = tmp_path / "review.blend"
     done = subprocess.run([sys.executable, "-m", "mocap_autolabel", "label", str(ROOT / "samples" / "demo_take.c3d"),
-                           "--blend", str(blend), "--quiet"], capture_output=True, text=True, env=env, timeout=300)
+                           "--blend", str(blend)], capture_output=True, text=True, env=env, timeout=300)
     assert done.returncode == 0, done.stderr
     assert blend.is_file() and f"  review   {blend}" in done.stdout
     assert "partial" not in done.stdout + done.stderr and "Saved copy" not in done.stdout + done.stderr
