@@ -14,6 +14,7 @@ from helpers import small_take
 from mocap_autolabel.cli import main
 from mocap_autolabel.core.formats.c3d import write_c3d
 from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.synth.generate import synthesize
 
 
 def test_info_real_file(capsys):
@@ -100,18 +101,23 @@ def test_label_demo_take_writes_labeled_c3d_report_and_labels(capsys, tmp_path):
     assert saved["labels"].shape == saved["confidence"].shape == (1200, raw.n_points)
 
 
-def test_label_with_the_wrong_layout_warns_and_names_the_right_one(capsys, tmp_path):
-    demo = ROOT / "samples" / "demo_take.c3d"  # a han19 take
+def test_label_with_the_wrong_layout_warns_or_refuses_and_names_the_right_one(capsys, tmp_path):
+    take = tmp_path / "glove.c3d"  # a glove13 take labeled with han19: a hand, but the wrong layout
+    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, take)
     report = tmp_path / "report.json"
-    assert main(["label", str(demo), "--layout", "glove13", "--report", str(report)]) == 0
+    assert main(["label", str(take), "--report", str(report)]) == 0
     text = capsys.readouterr().out
-    assert "warning  only 0.0 % of labeled samples are confident with layout 'glove13'" in text
-    assert "is this a han19 take? (--layout han19)" in text
+    assert "warning  only " in text and "% of labeled samples are confident with layout 'han19'" in text
+    assert "is this a glove13 take? (--layout glove13)" in text
     doubt = json.loads(report.read_text())["info"]["layout_doubt"]
-    assert doubt["layout"] == "glove13" and doubt["better"] == "han19" and doubt["share"] < doubt["better_share"]
-    assert main(["label", str(demo), "--report", str(report)]) == 0
+    assert doubt["layout"] == "han19" and doubt["better"] == "glove13" and doubt["share"] < doubt["better_share"]
+    assert main(["label", str(take), "--layout", "glove13", "--report", str(report)]) == 0
     assert "warning" not in capsys.readouterr().out
     assert "layout_doubt" not in json.loads(report.read_text())["info"]
+    demo = ROOT / "samples" / "demo_take.c3d"  # a han19 take labeled with glove13: no hand found, as in batch
+    assert main(["label", str(demo), "--layout", "glove13", "--report", str(report)]) == 1
+    err = capsys.readouterr().err
+    assert "no hand found" in err and "'han19' fits better: use --layout han19" in err
 
 
 def test_label_script_mode_writes_c3d(tmp_path):
@@ -141,7 +147,12 @@ def test_train_command_writes_a_model_and_card(tmp_path, capsys):
     assert "ETA" in captured.err and "20/20 steps" in captured.err
     card = json.loads((tmp_path / "tips3.json").read_text())
     assert card["layout"]["name"] == "tips3" and card["method"] == "set"
-    assert main(["label", str(ROOT / "samples" / "demo_take.c3d"), "--layout", "tips3", "--model", str(out)]) == 0
+    # The model labels (20 steps are too few to find the hand: the CLI would refuse the take, as batch does)
+    from mocap_autolabel.core.pipeline import label_take
+    from mocap_autolabel.core.take import read_take
+
+    labeling = label_take(read_take(ROOT / "samples" / "demo_take.c3d"), load_layout("tips3"), model=str(out))
+    assert labeling.n_frames == 1200 and labeling.info["layout"] == "tips3"
 
 
 @pytest.mark.parametrize("parts", [("c3d", "ezc3d-testFiles", "Vicon.c3d"),
