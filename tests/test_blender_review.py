@@ -346,21 +346,29 @@ def test_the_panel_labels_with_the_command_lines_default_layout(empty_scene):
     assert empty_scene.mocap_autolabel.layout == DEFAULT_LAYOUT
 
 
-def test_labeling_with_the_wrong_layout_says_which_fits(labeled):
-    """The han19 take labeled with glove13: the panel's summary names han19, a re-solve keeps the
-    warning, and labeling with han19 clears it."""
+def test_labeling_with_the_wrong_layout_says_which_fits(labeled, tmp_path):
+    """A glove13 take labeled with han19: the panel's summary names glove13, a re-solve keeps the
+    warning, and labeling with glove13 clears it. The han19 take labeled with glove13 finds no hand:
+    refused, naming han19 (batch's and the CLI's rule)."""
     from mocap_autolabel.blender.review import summary
 
     bpy, coll = labeled
     settings = bpy.context.scene.mocap_autolabel
     assert summary(state(coll).labeling, settings.sure)["layout_doubt"] is None
     settings.layout = "glove13"
+    with pytest.raises(RuntimeError, match="no hand found.*'han19' fits better"):
+        bpy.ops.mocap_autolabel.label()
+    glove = tmp_path / "glove.c3d"
+    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, glove)
+    bpy.ops.mocap_autolabel.import_markers(filepath=str(glove))
+    coll = settings.take
+    settings.layout = "han19"
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     doubt = summary(state(coll).labeling, settings.sure)["layout_doubt"]
-    assert (doubt.layout, doubt.better) == ("glove13", "han19") and doubt.share < doubt.better_share
+    assert (doubt.layout, doubt.better) == ("han19", "glove13") and doubt.share < doubt.better_share
     assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
     assert summary(state(coll).labeling, settings.sure)["layout_doubt"] == doubt
-    settings.layout = "han19"
+    settings.layout = "glove13"
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     assert summary(state(coll).labeling, settings.sure)["layout_doubt"] is None
 
