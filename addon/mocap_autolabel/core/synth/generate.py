@@ -509,19 +509,9 @@ def touch(hand: HandModel, poses: np.ndarray, finger: str, bone: str = "dist", a
     return out, np.linalg.norm(pads[:, 0] - pads[:, 1], axis=1)
 
 
-#: Hand sizes of :func:`range_of_motion`, ``(length, breadth)`` metres: the model's average hand and
-#: about 8 % smaller and larger (ANSUR II spans roughly that from its 10th to its 90th percentile),
-#: so that a labeler fitted on it is not tied to one hand size.
-ROM_HANDS = ((0.175, 0.078), (0.19, 0.085), (0.205, 0.092))
-
-
-def range_of_motion(layout: Layout, frames: int = 600, seed: int = 0, side: str = "right") -> np.ndarray:
-    """The layout's markers ``(len(ROM_HANDS) * frames, M, 3)`` (metres, layout order, no gaps or
-    noise) on hands of :data:`ROM_HANDS` moving through the generator's random motion (canonical
-    poses, synergies, uniform samples): a labeled take of no one in particular, for labelers that
-    must be fitted on one (``gmm``) when the performer's own is not given."""
-    out = []
-    for i, (length, breadth) in enumerate(ROM_HANDS):
-        hand = HandModel(length=length, breadth=breadth, side=side)
-        out.append(marker_motion(layout, hand, frames, seed=seed + i)[1])
-    return np.concatenate(out)
+def range_of_motion(layout: Layout, frames: int = 1200, seed: int = 0, side: str = "right") -> np.ndarray:
+    """The layout's markers ``(frames, M, 3)`` (metres, layout order, no gaps or noise) on the
+    model's average hand moving through the generator's random motion (canonical poses,
+    synergies, uniform samples): a labeled take of no one in particular, for labelers that must
+    be fitted on one (``gmm``) when the performer's own is not given."""
+    return marker_motion(layout, HandModel(side=side), frames, seed=seed)[1]
