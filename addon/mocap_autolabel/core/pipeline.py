@@ -479,12 +479,15 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
 #: as a hand spreads its "labels" over half a metre or more.
 HAND_FRAMES, HAND_REACH = 0.3, 0.25
 #: A labeled marker counts towards "a hand is here" only if its segment's mean per-frame
-#: probability, or its calibrated confidence, is at least this: a full-body capture labeled with a
-#: hand layout gets labels, but ones its labeler does not believe (``set``: median 0.26 on ezc3d's
-#: Vicon.c3d; 0.98 and up on hands). The confidence is for ``perm`` and ``cnn``, whose per-frame
-#: probabilities are low even where they are right (median 0.25 and 0.39 on the demo take, which
-#: they label 92 % right; calibrated, their segments there reach 0.5 in every frame).
+#: probability (its calibrated confidence for :data:`LOW_PROBABILITY` methods) is at least this: a
+#: full-body capture labeled with a hand layout gets labels, but ones its labeler does not believe
+#: (``set``: median 0.26 on ezc3d's Vicon.c3d; 0.98 and up on hands).
 BELIEVED = 0.5
+#: Methods whose per-frame probabilities are low even where they are right (median 0.25 for
+#: ``perm`` and 0.39 for ``cnn`` on the demo take, which they label 92 % right): their segments are
+#: believed by calibrated confidence, which there reaches 0.5 in every frame. Not for ``set``: a
+#: han19 take labeled with glove13 has calibrated confidences of 0.5 on labels that are wrong.
+LOW_PROBABILITY = ("perm", "cnn")
 
 
 @dataclass(frozen=True)
@@ -511,12 +514,13 @@ class HandCheck:
 
 
 def _believed(labeling: Labeling, m: int) -> np.ndarray:
-    """bool ``(F, M)``: where each label sits on a segment whose mean probability or calibrated
-    confidence reaches :data:`BELIEVED`."""
+    """bool ``(F, M)``: where each label sits on a segment whose mean probability (calibrated
+    confidence for :data:`LOW_PROBABILITY` methods) reaches :data:`BELIEVED`."""
     seg = labeling.segment_ids()  # (F, P)
     frame, slot = np.nonzero(seg >= 0)
     s = seg[frame, slot]
-    belief = np.maximum(labeling.evidence[:, 0], labeling.confidence)
+    low = labeling.info.get("method") in LOW_PROBABILITY
+    belief = labeling.confidence if low else labeling.evidence[:, 0]
     keep = (labeling.label[s] >= 0) & (belief[s] >= BELIEVED)
     out = np.zeros((labeling.n_frames, m), dtype=bool)
     out[frame[keep], labeling.label[s[keep]]] = True
