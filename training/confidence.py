@@ -58,8 +58,10 @@ PRIOR_COMBOS = {("set", "vote")}
 #: (switch cost, null prior, partner and continuity evidence) and are calibrated at them. Their own
 #: fit is the same grid search over scores that are far noisier (about 2 hours per pair and layout
 #: on 2 cores); set's settings already lift perm + vote on han19 from 59.2 to 69.8 % of instances
-#: right and cnn + vote from 64.7 to 72.6 % (32 validation takes of up to 1,000 frames), where
-#: the calibrations before had them at no null prior, free switches and no partner evidence.
+#: right and cnn + vote from 64.7 to 72.6 % (32 validation takes of up to 1,000 frames), perm +
+#: vote on glove13 from 64.8 to 72.6 % (16 takes); cnn + vote on glove13 stays where it was (71.3
+#: and 71.1 %, 16 takes). The calibrations before had them at no null prior, free switches and no
+#: partner evidence.
 BORROWED_VOTE = {("perm", "vote"): "set", ("cnn", "vote"): "set"}
 #: Per-tracklet null priors tried, nats (see ``core.temporal.voting.vote``). Per-sample priors
 #: were tried too: they help synthetic takes and hurt real hands, whose hard frames (fists) give
