@@ -356,7 +356,7 @@ def test_labeling_with_the_wrong_layout_says_which_fits(labeled, tmp_path):
     settings = bpy.context.scene.mocap_autolabel
     assert summary(state(coll).labeling, settings.sure)["layout_doubt"] is None
     settings.layout = "glove13"
-    with pytest.raises(RuntimeError, match="no hand found.*'han19' fits better"):
+    with pytest.raises(RuntimeError, match="no hand found.*'han19' fits better: use Layout han19 in the Mocap tab"):
         bpy.ops.mocap_autolabel.label()
     glove = tmp_path / "glove.c3d"
     write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, glove)

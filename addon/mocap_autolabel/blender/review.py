@@ -426,7 +426,7 @@ class LabelRequest:
             doubt = layout_doubt(self.take, self.layout, labeling)
             hand = check_hand(self.take, self.layout, labeling, doubt)
             if not hand.found:
-                raise MocapInputError(self.take_name, str(hand))
+                raise MocapInputError(self.take_name, hand.describe("Layout {} in the Mocap tab"))
             doubt = asdict(doubt) if doubt else None
         else:
             doubt = self.previous.info.get("layout_doubt") if self.previous is not None else None

@@ -332,6 +332,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                               "marker_rms_mm": round(hand_fit.overall_rms() * 1000, 3),
                               "downgraded_segments": downgrade(labeling, residuals)}
         times["validate"] = time.perf_counter() - t
+    share(1.0)
     times["total"] = time.perf_counter() - t0
     info["seconds"] = {key: round(v, 4) for key, v in times.items()}
     return labeling
@@ -505,9 +506,14 @@ class HandCheck:
         return self.share >= HAND_FRAMES
 
     def __str__(self) -> str:
+        return self.describe()
+
+    def describe(self, use: str = "--layout {}") -> str:
+        """The one line; ``use`` says how to pick the better layout where one fits (the command
+        line's flag by default; Blender names its panel field)."""
         if self.found:
             return f"a hand in {100 * self.share:.0f} % of frames"
-        hint = (f"'{self.better}' fits better: use --layout {self.better}" if self.better else
+        hint = (f"'{self.better}' fits better: use {use.format(self.better)}" if self.better else
                 f"is this a {self.layout} take?")
         return (f"no hand found: only {100 * self.share:.0f} % of frames have half of the {self.layout} markers "
                 f"labeled with some confidence within {HAND_REACH:g} m of each other ({hint})")
