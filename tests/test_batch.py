@@ -177,3 +177,81 @@ def test_batch_runs_as_a_blender_script(tmp_path):
                            "--jobs", "2", "--quiet"], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert "2 ok, 0 failed, 0 skipped" in done.stdout
+
+
+def _readme_batch_examples() -> tuple[str, list[str]]:
+    """README's batch settings file (the TOML block of "Batch runs") and its batch command lines."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text[text.index("## Batch runs"):]
+    toml = section[section.index("```toml\n") + len("```toml\n"):]
+    toml = toml[:toml.index("```")]
+    commands = [line.split("#")[0].strip() for line in text.splitlines()
+                if line.startswith("python -m mocap_autolabel batch ")]
+    return toml, commands
+
+
+def test_every_readme_batch_example_runs_as_written(tmp_path):
+    """README's studio.toml (solve_hand + fbx + jobs = 2) and its batch synopsis with every output flag,
+    in spawned workers from a parent that imported bpy (they failed with No module named '_bpy')."""
+    pytest.importorskip("bpy", reason="the bpy module (pip install bpy==5.0.1) is not installed")
+    import dataclasses
+
+    import numpy as np
+    from mocap_autolabel.core.hand.calibrate import Calibration
+    from mocap_autolabel.core.synth.generate import SynthConfig
+
+    toml, commands = _readme_batch_examples()
+    assert "solve_hand = true" in toml and "jobs = 2" in toml and len(commands) == 1
+    settings = BatchSettings.from_toml(_write(tmp_path / "studio.toml", toml))
+    layout = load_layout(settings.layout)
+    (tmp_path / "takes").mkdir()
+    config = dataclasses.replace(SynthConfig(), side="right")
+    for seed in range(2):
+        synth = synthesize(layout, 300, seed=seed, config=config)
+        write_c3d(synth.take, tmp_path / "takes" / f"take{seed}.c3d")
+    # the performer's calibration the settings file names: the synthetic hand itself, markers on their spots
+    hand = synth.hand
+    os.makedirs(os.path.dirname(settings.calibration), exist_ok=True)
+    Calibration(layout.name, list(layout.names), hand.side, hand.length, hand.breadth,
+                np.zeros((len(layout), 3))).save(settings.calibration)
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "addon"))
+    cli = [sys.executable, "-m", "mocap_autolabel"]
+
+    # "batch INPUTS... -o OUT_DIR --config studio.toml", as the settings file is meant to be used
+    done = subprocess.run(cli + ["batch", "takes", "-o", "studio", "--config", "studio.toml", "--quiet"],
+                          cwd=tmp_path, capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "2 ok, 0 failed, 0 skipped" in done.stdout and "with 2 job(s)" in done.stdout
+    for seed in range(2):
+        report = json.loads((tmp_path / "studio" / f"take{seed}.report.json").read_text())
+        assert report["outputs"]["fbx"] == f"take{seed}.fbx" and report["layout"] == "glove13"
+        assert report["hand"]["marker_rms_mm"] < 10
+    summary = json.loads((tmp_path / "studio" / "summary.json").read_text())
+    assert summary["settings"]["calibration"] == str(tmp_path / "performers" / "p01.json")
+
+    # the synopsis, every optional flag given (INPUTS, OUT_DIR and the files filled in), on the han19 takes
+    words = commands[0].split()[3:]
+    flags = [w.strip("[]") for w in words if w.startswith("[--")]
+    assert {"--jobs", "--solve-hand", "--blend", "--fbx", "--bvh", "--validate"} <= set(flags)
+    _synthetic(tmp_path / "han19", 2)
+    values = {"--config": "han19.toml", "--layout": "han19", "--model": str(ROOT / "addon" / "mocap_autolabel" /
+                                                                            "models" / "set_han19.onnx"),
+              "--jobs": "2", "--calibration": None, "--method": "set"}
+    _write(tmp_path / "han19.toml", "[batch]\nconfident = 0.9\n")
+    argv = ["batch", "han19", "-o", "synopsis"]
+    for flag in flags:
+        if flag in ("--quiet", "--json-progress", "--calibration"):  # one of the pair; a calibration is per layout
+            continue
+        argv += [flag] + ([values[flag]] if values.get(flag) else [])
+    done = subprocess.run(cli + argv + ["--quiet"], cwd=tmp_path, capture_output=True, text=True, env=env,
+                          timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "2 ok, 0 failed, 0 skipped" in done.stdout
+    assert "partial.blend" not in done.stdout + done.stderr  # Blender's own save lines stay out
+    for suffix in (".labeled.c3d", ".report.json", ".blend", ".fbx", ".bvh"):
+        assert (tmp_path / "synopsis" / f"synth0{suffix}").stat().st_size > 0
+
+
+def _write(path: Path, text: str) -> str:
+    path.write_text(text, encoding="utf-8")
+    return str(path)

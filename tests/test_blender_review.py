@@ -353,21 +353,29 @@ def test_the_panel_labels_with_the_command_lines_default_layout(empty_scene):
     assert empty_scene.mocap_autolabel.layout == DEFAULT_LAYOUT
 
 
-def test_labeling_with_the_wrong_layout_says_which_fits(labeled):
-    """The han19 take labeled with glove13: the panel's summary names han19, a re-solve keeps the
-    warning, and labeling with han19 clears it."""
+def test_labeling_with_the_wrong_layout_says_which_fits(labeled, tmp_path):
+    """A glove13 take labeled with han19: the panel's summary names glove13, a re-solve keeps the
+    warning, and labeling with glove13 clears it. The han19 take labeled with glove13 finds no hand:
+    refused, naming han19 (batch's and the CLI's rule)."""
     from mocap_autolabel.blender.review import summary
 
     bpy, coll = labeled
     settings = bpy.context.scene.mocap_autolabel
     assert summary(state(coll).labeling, settings.sure)["layout_doubt"] is None
     settings.layout = "glove13"
+    with pytest.raises(RuntimeError, match="no hand found.*'han19' fits better: use Layout han19 in the Mocap tab"):
+        bpy.ops.mocap_autolabel.label()
+    glove = tmp_path / "glove.c3d"
+    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, glove)
+    bpy.ops.mocap_autolabel.import_markers(filepath=str(glove))
+    coll = settings.take
+    settings.layout = "han19"
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     doubt = summary(state(coll).labeling, settings.sure)["layout_doubt"]
-    assert (doubt.layout, doubt.better) == ("glove13", "han19") and doubt.share < doubt.better_share
+    assert (doubt.layout, doubt.better) == ("han19", "glove13") and doubt.share < doubt.better_share
     assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
     assert summary(state(coll).labeling, settings.sure)["layout_doubt"] == doubt
-    settings.layout = "han19"
+    settings.layout = "glove13"
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     assert summary(state(coll).labeling, settings.sure)["layout_doubt"] is None
 
@@ -494,3 +502,45 @@ def test_a_labeling_that_finishes_after_an_edit_is_refused(labeled):
     with pytest.raises(ValueError, match="changed while the labeling ran"):
         finish_label(bpy.context.scene, coll, request, result)
     assert state(coll).review.constraints == edited.review.constraints
+
+
+def test_label_a_body_take_is_an_error_and_builds_nothing(empty_scene, bpy_module):
+    """The CLI's and batch's no-hand rule: a body capture used to be labeled with 'finger' names and
+    FINISHED ('5 / 19 labels, 0.0 % confident'); now one ERROR line and no labeled collection."""
+    from conftest import data_path
+
+    bpy = bpy_module
+    bpy.ops.mocap_autolabel.import_markers(filepath=str(data_path("c3d", "ezc3d-testFiles", "Vicon.c3d")))
+    coll = empty_scene.mocap_autolabel.take
+    before = set(bpy.data.collections.keys())
+    with pytest.raises(RuntimeError, match=r"Vicon: no hand found: only 0 % of frames have half of the han19"):
+        bpy.ops.mocap_autolabel.label()
+    assert set(bpy.data.collections.keys()) == before and "mocap_labeled" not in coll.keys()
+
+
+def test_label_warns_when_the_vote_hit_its_time_limit(empty_scene, bpy_module, take_file, monkeypatch, capfd):
+    """As the CLI and batch do ('the vote's exclusive assignment stopped at its 3 s limit')."""
+    from mocap_autolabel.core import pipeline
+
+    real = pipeline.label_take
+
+    def hurried(*args, **kwargs):  # a hand take never reaches the limit: say it did
+        labeling = real(*args, **kwargs)
+        labeling.info["time_limited"] = 2
+        return labeling
+
+    monkeypatch.setattr(pipeline, "label_take", hurried)
+    bpy_module.ops.mocap_autolabel.import_markers(filepath=str(take_file))
+    assert bpy_module.ops.mocap_autolabel.label() == {"FINISHED"}
+    out = capfd.readouterr()
+    assert "stopped at its 3 s limit 2 time(s)" in out.out + out.err
+
+
+def test_gmm_labels_in_blender_without_a_fit_take(empty_scene, bpy_module, take_file):
+    """gmm always failed in the panel (it had no field for the labeled take it fits on); it now fits
+    on the layout's synthetic range of motion."""
+    bpy_module.ops.mocap_autolabel.import_markers(filepath=str(take_file))
+    settings = empty_scene.mocap_autolabel
+    settings.method = "gmm"
+    assert bpy_module.ops.mocap_autolabel.label() == {"FINISHED"}
+    assert state(settings.take).labeling.info["method"] == "gmm"

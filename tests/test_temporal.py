@@ -6,7 +6,7 @@ import itertools
 
 import numpy as np
 import pytest
-from conftest import data_path
+from conftest import ROOT, data_path
 from mocap_autolabel.core.errors import MocapInputError
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint, labeled_take, segments_from_runs
 from mocap_autolabel.core.layout import load_layout
@@ -779,3 +779,38 @@ def test_continuity_needs_a_held_anchor_and_a_short_gap(case):
     # MAX_GAP_S says nothing.
     assert (continuity_logp(*args, inside=1.0, outside=4.0)[:, 0] == 0).all()
     assert (continuity_logp(*_continuity_case()[0], inside=0.0, outside=0.0) == 0).all()
+
+
+def test_perm_and_cnn_vote_with_sets_settings_and_are_calibrated_at_them(tmp_path):
+    """perm and cnn showed every segment as uncertain with calibrations made at no vote settings;
+    they are now calibrated as set's are, at set's fitted vote settings, and say when (as on the
+    validation takes) none of their segments can be rated confident."""
+    import json
+    import shutil
+
+    from mocap_autolabel.core.temporal.confidence import CALIBRATIONS, load_calibration
+
+    import training.confidence as fit
+
+    shipped = json.loads(open(CALIBRATIONS, encoding="utf-8").read())
+    for layout in ("han19", "glove13"):
+        donor = shipped[f"set/vote/{layout}"]
+        for method in ("perm", "cnn"):
+            entry = shipped[f"{method}/vote/{layout}"]
+            assert entry["vote_settings_from"] == "set/vote"
+            for key in ("null_prior", "switch_cost", "partner", "continuity"):
+                assert entry[key] == donor[key], (method, layout, key)
+            assert entry["source"] == "64 synthetic takes of 150-2000 frames, seeds 50000+"
+            assert load_calibration(method, "vote", layout).never_sure  # 73-90 % of segments right: no promise
+    assert not load_calibration("set", "vote", "han19").never_sure
+    demo = read_take(ROOT / "samples" / "demo_take.c3d")
+    lab = label_take(demo, load_layout("han19"), method="perm")
+    assert lab.info["null_prior"] == shipped["set/vote/han19"]["null_prior"] and lab.info["never_confident"]
+    assert "never_confident" not in label_take(demo, load_layout("han19")).info
+    out = tmp_path / "confidence.json"  # the training script's path for them, on two short takes
+    shutil.copy(CALIBRATIONS, out)
+    assert fit.main(["--layouts", "han19", "--only", "perm/vote", "--takes", "2", "--frames", "150",
+                     "--out", str(out)]) == 0
+    new = json.loads(out.read_text())["perm/vote/han19"]
+    assert new["vote_settings_from"] == "set/vote" and new["switch_cost"] == shipped["set/vote/han19"]["switch_cost"]
+    assert new["source"].startswith("2 synthetic takes")

@@ -21,19 +21,10 @@ import os
 import sys
 import time
 import tomllib
-import warnings
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 
 TAKE_EXTENSIONS = (".c3d", ".trc", ".tsv")
-#: A hand is "found" when at least this share of frames has at least half the layout labeled, all
-#: within HAND_REACH (metres) of their median: a hand is about 0.2 m long, a body capture labeled
-#: as a hand spreads its "labels" over half a metre or more.
-HAND_FRAMES, HAND_REACH = 0.3, 0.25
-#: A labeled marker counts towards "a hand is here" only if its segment's mean per-frame
-#: probability is at least this: a full-body capture labeled with a hand layout gets labels, but
-#: ones its labeler does not believe (median 0.26 on ezc3d's Vicon.c3d; 0.98 and up on hands).
-BELIEVED = 0.5
 
 
 @dataclass
@@ -148,34 +139,18 @@ def _finished(out_dir: str, name: str, settings: BatchSettings) -> dict | None:
     return report
 
 
-def _believed(labeling, m: int):
-    """``(F, M)``: where each label sits on a segment whose mean probability reaches :data:`BELIEVED`."""
-    import numpy as np
+def _worker_init() -> None:
+    """Undo in a spawned worker what the parent's ``import bpy`` did to the inherited ``sys.path``.
 
-    seg = labeling.segment_ids()  # (F, P)
-    frame, slot = np.nonzero(seg >= 0)
-    s = seg[frame, slot]
-    keep = (labeling.label[s] >= 0) & (labeling.evidence[s, 0] >= BELIEVED)
-    out = np.zeros((labeling.n_frames, m), dtype=bool)
-    out[frame[keep], labeling.label[s[keep]]] = True
-    return out
-
-
-def _hand_frames(markers, believed=None) -> float:
-    """Share of frames whose labeled markers ``(F, M, 3)`` look like one hand (see :data:`HAND_FRAMES`);
-    ``believed`` ``(F, M)`` keeps only those markers (see :data:`BELIEVED`)."""
-    import numpy as np
-
-    if believed is not None:
-        markers = np.where(believed[..., None], markers, np.nan)
-    if not len(markers):
-        return 0.0
-    count = np.isfinite(markers[..., 0]).sum(axis=1)
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # frames with no labeled marker
-        centre = np.nanmedian(markers, axis=1, keepdims=True)
-        reach = np.nanmax(np.linalg.norm(markers - centre, axis=2), axis=1)
-    return float(((count >= markers.shape[1] / 2) & (reach <= HAND_REACH)).mean())
+    Importing the bpy module puts Blender's script folders first on ``sys.path``; one of them holds
+    Blender's pure-Python ``bpy`` package, which needs the ``_bpy`` built into the module. A spawned
+    worker starts with the parent's ``sys.path``, so its own ``import bpy`` found that package
+    before the module and failed with ``No module named '_bpy'``. Dropping those folders lets the
+    worker import the real module, which puts them back itself.
+    """
+    if "bpy" in sys.modules:  # bpy already imported (a forked worker): nothing to undo
+        return
+    sys.path[:] = [p for p in sys.path if not os.path.isfile(os.path.join(p or ".", "bpy", "__init__.py"))]
 
 
 def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
@@ -210,7 +185,7 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     from .core.formats.c3d import write_c3d
     from .core.labeling import labeled_take, unlabeled_point_names
     from .core.layout import load_layout
-    from .core.pipeline import label_take, layout_doubt, solve_take, time_limit_warning
+    from .core.pipeline import check_hand, label_take, layout_doubt, solve_take, time_limit_warning
     from .core.take import read_take
 
     t = time.perf_counter()
@@ -228,16 +203,12 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
                           validate=settings.validate, hand=hand_cal)
     timings["label"] = round(time.perf_counter() - t, 4)
     labeled = labeled_take(take, labeling)
-    hand_frames = _hand_frames(labeled.positions[:, :len(layout)], _believed(labeling, len(layout)))
     doubt = layout_doubt(take, layout, labeling, settings.confident)
-    if hand_frames < HAND_FRAMES:
-        hint = f"'{doubt.better}' fits better: use --layout {doubt.better}" if doubt else \
-            f"is this a {layout.name} take?"
-        raise MocapInputError(path, f"no hand found: only {100 * hand_frames:.0f} % of frames have half of the "
-                                    f"{layout.name} markers labeled with some confidence within {HAND_REACH:g} m "
-                                    f"of each other ({hint})")
+    hand = check_hand(take, layout, labeling, doubt, labeled)
+    if not hand.found:
+        raise MocapInputError(path, str(hand))
     out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
-           "hand_frames": round(hand_frames, 4), "summary": labeling.summary(
+           "hand_frames": round(hand.share, 4), "summary": labeling.summary(
                settings.confident, take.first_frame, unlabeled_point_names(take.names, layout.names)),
            "outputs": {}}
     said = [str(w) for w in (doubt, time_limit_warning(labeling)) if w]
@@ -264,10 +235,12 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
 
 def _blender_outputs(take, solved, stem: str, settings: BatchSettings) -> dict:
     from .blender.export import write_solved_scene
+    from .core.quiet import silenced_stdout
 
     paths = {kind: stem + "." + kind if on else None
              for kind, on in (("blend", settings.blend), ("fbx", settings.fbx), ("bvh", settings.bvh))}
-    written = write_solved_scene(take, solved, **paths)
+    with silenced_stdout():  # Blender's "Saved copy as .partial.blend" and the exporters' lines
+        written = write_solved_scene(take, solved, **paths)
     return {kind: os.path.basename(path) for kind, path in written.items()}
 
 
@@ -367,7 +340,7 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
         os.environ.update(env)  # spawned workers read these before numpy and onnxruntime start
         try:
             context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(settings.jobs, mp_context=context) as pool:
+            with ProcessPoolExecutor(settings.jobs, mp_context=context, initializer=_worker_init) as pool:
                 pending = {}
                 for path, name in todo:  # no "start" events: the pool decides when a take starts
                     pending[pool.submit(process_take, path, name, out_dir, settings)] = name

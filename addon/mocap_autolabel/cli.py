@@ -26,6 +26,82 @@ class _UsageError(Exception):
     pass
 
 
+class _ProgressBar:
+    """Progress of one long command (``label``, ``solve``) on stderr: stage, share done, seconds.
+
+    Drawn on a terminal, or anywhere when asked (``--progress``), never with ``--quiet``; it
+    appears only once the work has run for :attr:`DELAY` seconds, so short takes print nothing
+    extra. On a terminal one line is redrawn in place and wiped at the end (stdout keeps only the
+    results); elsewhere (a log) a line is written per stage and per tenth of the work.
+
+    Call it as ``bar(message)`` at each stage (``label_take(progress=...)``), ``bar.share(x)``
+    with the share done, 0 to 1 (``label_take(done=...)``), or ``bar(message, share)``.
+    """
+
+    DELAY = 1.0  # seconds before anything is drawn
+    WIDTH = 24
+
+    def __init__(self, shown: bool, stream=None) -> None:
+        import time
+
+        self.stream = stream or sys.stderr
+        self.shown = shown
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.clock = time.perf_counter
+        self.start = self.clock()
+        self.message, self.done = "", None
+        self.drawn_at = -1.0
+        self.logged: tuple[str, int] | None = None
+        self.visible = False
+
+    @classmethod
+    def for_args(cls, args) -> _ProgressBar:
+        return cls(not args.quiet and (args.progress or sys.stderr.isatty()))
+
+    def __call__(self, message: str, share: float | None = None) -> None:
+        self.message = message
+        if share is not None:
+            self.done = share
+        self._draw(force=True)
+
+    def stage(self, message: str, share: float | None = None) -> None:
+        """A new stage whose share done is ``share`` (None: not known, only the seconds show)."""
+        self.done = None
+        self(message, share)
+
+    def share(self, share: float) -> None:
+        self.done = share
+        self._draw()
+
+    def _draw(self, force: bool = False) -> None:
+        now = self.clock()
+        elapsed = now - self.start
+        if not self.shown or elapsed < self.DELAY or (not force and now - self.drawn_at < 0.1):
+            return
+        self.drawn_at = now
+        part = min(max(self.done or 0.0, 0.0), 1.0)
+        filled = int(self.WIDTH * part)
+        bar = f"[{'#' * filled}{'.' * (self.WIDTH - filled)}] {100 * part:3.0f} %" if self.done is not None else ""
+        line = f"{bar}  {self.message}  {elapsed:.1f} s".strip()
+        if self.tty:
+            self.stream.write("\r" + line[:119].ljust(119))
+            self.visible = True
+        else:
+            key = (self.message, int(10 * part))
+            if key == self.logged:
+                return
+            self.logged = key
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        """Wipe the bar's line (a terminal) so that the results start on a clean line."""
+        if self.visible:
+            self.stream.write("\r" + " " * 119 + "\r")
+            self.stream.flush()
+            self.visible = False
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="mocap_autolabel", description="Automatic labeling of optical hand motion capture.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
@@ -77,7 +153,8 @@ def build_parser() -> argparse.ArgumentParser:
     lab.add_argument("--model", metavar="MODEL.onnx", help="ONNX model for set/perm/cnn (default: the shipped one)")
     lab.add_argument("--fit", metavar="LABELED",
                      help="a labeled take of the subject: gmm fits on it; nearest starts from its first frame "
-                          "(default for nearest: set's labels of the first frame)")
+                          "(defaults: gmm fits on the layout's synthetic range of motion, nearest starts from "
+                          "set's labels of the first frame)")
     lab.add_argument("--validate", action="store_true",
                      help="IK validation: fit the hand to the labels, vote again with the fit's evidence, and "
                           "downgrade segments the hand cannot explain (vote only; slower: it calibrates a hand)")
@@ -91,6 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "(open it in Blender with the add-on: Mocap tab > Review); needs Blender or bpy")
     lab.add_argument("--solve-hand", action="store_true",
                      help="also fit the hand to the labels and put the keyed rig in --blend")
+    _progress_flags(lab)
 
     sol = sub.add_parser("solve", help="fit the rigged hand to a labeled take: calibration, IK, Blender/FBX/BVH")
     sol.add_argument("file", metavar="FILE", help="a labeled take (C3D, TRC or TSV) with the layout's marker names")
@@ -115,6 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "ThumbTip_L, vicon LeftHand:ThumbTip); see label --hand-names")
     sol.add_argument("--smooth-hz", type=float, default=10.0, help="low-pass cut-off of the pose track (0: off)")
     sol.add_argument("--report", metavar="REPORT.json", help="per-frame and overall marker RMS (mm), calibration")
+    _progress_flags(sol)
 
     bat = sub.add_parser("batch", help="label (and solve) folders of takes headless, with progress and reports")
     bat.add_argument("inputs", nargs="+", metavar="INPUT", help="take files, folders (searched recursively) or globs")
@@ -123,7 +202,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="settings file (the keys of the flags below, e.g. layout = \"han19\"); flags override it")
     bat.add_argument("--layout", help="built-in layout name or a layout .toml (default han19)")
     bat.add_argument("--model", metavar="MODEL.onnx", help="ONNX model (default: the shipped one)")
-    bat.add_argument("--method", choices=("set", "perm", "cnn", "nearest"), help="per-frame labeler (default set)")
+    bat.add_argument("--method", choices=("set", "perm", "cnn", "gmm", "nearest"),
+                     help="per-frame labeler (default set; gmm fits on the layout's synthetic range of motion)")
     bat.add_argument("--temporal", choices=("vote", "viterbi", "none"), help="temporal mode (default vote)")
     bat.add_argument("--validate", action="store_true", default=None, help="IK validation of the labels")
     bat.add_argument("--confident", type=float, help="confidence counted as confident in reports (default 0.95)")
@@ -195,6 +275,13 @@ def _hands_line(labeling, confident: float = 0.95) -> str | None:
     return line
 
 
+def _progress_flags(parser: argparse.ArgumentParser) -> None:
+    shown = parser.add_mutually_exclusive_group()
+    shown.add_argument("--progress", action="store_true",
+                       help="show the progress bar (stderr) also when it is not a terminal")
+    shown.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the process exit code."""
     try:
@@ -226,6 +313,8 @@ def _fail(path: str, exc: BaseException) -> int:
 
     if isinstance(exc, MocapInputError):
         print(f"error: {exc}", file=sys.stderr)
+    elif isinstance(exc, OSError) and exc.strerror:  # a file that cannot be read or written: say which
+        print(f"error: {exc.filename or path}: {exc.strerror}", file=sys.stderr)
     else:
         print(f"error: {path}: unexpected {type(exc).__name__}: {exc}", file=sys.stderr)
     return EXIT_FAILED
@@ -299,6 +388,7 @@ def _import(args) -> int:
     from .blender.export import save_blend
     from .blender.scene import ImportOptions, build_take
     from .core.atomic import atomic_output
+    from .core.quiet import silenced_stdout
     from .core.take import read_take
 
     try:
@@ -309,7 +399,8 @@ def _import(args) -> int:
     scene = bpy.context.scene
     options = ImportOptions(scale=args.scale, frame_offset=args.frame_offset, name_filter=args.names)
     collection = build_take(take, scene, options)
-    save_blend(args.blend)
+    with silenced_stdout():
+        save_blend(args.blend)
     summary = take.summary() | {
         "blend": os.path.abspath(args.blend),
         "collection": collection.name,
@@ -330,9 +421,11 @@ def _label(args) -> int:
     import numpy as np
 
     from .core.atomic import atomic_output
+    from .core.errors import MocapInputError
     from .core.labeling import labeled_take, layout_markers, unlabeled_point_names
     from .core.layout import load_layout
-    from .core.pipeline import label_take, layout_doubt, time_limit_warning
+    from .core.pipeline import hand_checks, label_take, layout_doubt, time_limit_warning
+    from .core.quiet import silenced_stdout
     from .core.synth.generate import load_truth, truth_path
     from .core.take import read_take
 
@@ -345,18 +438,16 @@ def _label(args) -> int:
     if args.validate and args.temporal != "vote":
         print("mocap_autolabel label: error: --validate needs --temporal vote", file=sys.stderr)
         return EXIT_USAGE
-    if args.method == "gmm" and not args.fit:
-        print("mocap_autolabel label: error: gmm needs --fit LABELED: a labeled take of the subject to fit on",
-              file=sys.stderr)
-        return EXIT_USAGE
     if args.blend and not args.blend.lower().endswith(".blend") or args.solve_hand and not args.blend:
         print("mocap_autolabel label: error: --blend must name a .blend file, and --solve-hand needs --blend",
               file=sys.stderr)
         return EXIT_USAGE
     if args.blend and _bpy_or_none("label --blend") is None:
         return EXIT_USAGE
+    bar = _ProgressBar.for_args(args)
     try:
         layout = load_layout(args.layout)
+        bar(f"reading {args.file}")
         take = read_take(args.file)
         labeled = layout_markers(read_take(args.fit), layout) if args.fit else None
         hand = None
@@ -369,13 +460,22 @@ def _label(args) -> int:
                               score=args.vote, p=args.p, q=args.q, n_best=args.n_best,
                               validate=args.validate, hand=hand, **_hand_options(args),
                               fit=labeled if args.method == "gmm" else None,
-                              start=labeled[0] if (labeled is not None and args.method == "nearest") else None)
-        doubt = layout_doubt(take, layout, labeling) if labeling.info["hands"]["count"] == 1 else None
+                              start=labeled[0] if (labeled is not None and args.method == "nearest") else None,
+                              progress=bar, done=bar.share, **_hand_options(args))
+        bar("checking the layout and the hand", 1.0)
+        two = labeling.info["hands"]["count"] == 2
+        doubt = None if two else layout_doubt(take, layout, labeling)
+        checks = hand_checks(take, layout, labeling, doubt)
+        if not any(check.found for _, check in checks):  # batch's rule: labels on a body capture are no hand
+            raise MocapInputError(args.file, "; ".join(f"{side} hand: {check}" if side else str(check)
+                                                       for side, check in checks))
+        missed = [f"{side} hand: {check}" for side, check in checks if not check.found]
         if doubt:
             labeling.info["layout_doubt"] = asdict(doubt)  # in the report, and in the review scene's panel
         if args.output:
             from .core.formats.c3d import write_c3d
 
+            bar(f"writing {args.output}")
             write_c3d(labeled_take(take, labeling), args.output)
         solved = None
         if args.blend and labeling.info["hands"]["count"] == 2:
@@ -384,13 +484,18 @@ def _label(args) -> int:
         if args.solve_hand:
             from .core.pipeline import solve_take
 
-            solved = solve_take(labeled_take(take, labeling), layout)
+            bar.stage("solving the hand")
+            solved = solve_take(labeled_take(take, labeling), layout, **_solve_progress(bar))
         if args.blend:
             from .blender.export import write_review_scene
 
-            write_review_scene(take, args.layout, labeling, args.blend, args.method, args.temporal, solved)
+            bar(f"writing {args.blend}")
+            with silenced_stdout():  # Blender's "Saved copy as .partial.blend": we say what we wrote
+                write_review_scene(take, args.layout, labeling, args.blend, args.method, args.temporal, solved)
     except Exception as exc:
+        bar.close()
         return _fail(args.file, exc)
+    bar.close()
     # Frames as the file (and Blender, on import) numbers them; points as the labeled C3D names them.
     summary = labeling.summary(first_frame=take.first_frame, points=unlabeled_point_names(take.names, layout.names))
     seconds = labeling.info["seconds"]["total"]
@@ -402,6 +507,15 @@ def _label(args) -> int:
     hands = _hands_line(labeling)
     if hands:
         print(f"  hands    {hands}")
+    for line in missed:
+        print(f"  warning  {line}")
+    if args.method == "gmm" and not args.fit:
+        print(f"  note     gmm fitted on the {layout.name} synthetic range of motion: give --fit LABELED, a labeled "
+              f"take of the performer, for a fit to their hand")
+    if labeling.info.get("never_confident"):
+        print(f"  note     {args.method} + {args.temporal} never rates a segment confident on {layout.name}: on "
+              f"synthetic validation takes none of its segments were right 99.9 % of the time, so all are left "
+              f"for review (set is the method whose confident segments can be skipped)")
     if doubt:
         print(f"  warning  {doubt} (--layout {doubt.better})")
     hurried = time_limit_warning(labeling)
@@ -422,20 +536,31 @@ def _label(args) -> int:
     if args.blend:
         hand = f" and the solved hand (marker RMS {solved.fit.overall_rms() * 1000:.2f} mm)" if solved else ""
         print(f"  review   {args.blend}: labeled markers coloured by confidence{hand}")
-    if args.report:
-        with atomic_output(args.report) as tmp, open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(report, fh, indent=1)
-        print(f"  report   {args.report}")
-    if args.labels:
-        with atomic_output(args.labels) as tmp, open(tmp, "wb") as fh:
-            np.savez_compressed(fh, labels=labeling.per_sample(), confidence=labeling.per_sample_confidence(),
-                                names=np.array(labeling.names))
-        print(f"  labels   {args.labels}")
+    try:
+        if args.report:
+            _write_report(args.report, report)
+        if args.labels:
+            with atomic_output(args.labels) as tmp, open(tmp, "wb") as fh:
+                np.savez_compressed(fh, labels=labeling.per_sample(), confidence=labeling.per_sample_confidence(),
+                                    names=np.array(labeling.names))
+            print(f"  labels   {args.labels}")
+    except OSError as exc:
+        return _fail(args.file, exc)
+    if not (args.output or args.blend or args.report or args.labels):
+        print("  output   none written: give -o OUT.c3d for the labeled take (or --report, --labels, --blend)")
     return EXIT_OK
 
 
+def _solve_progress(bar: _ProgressBar) -> dict:
+    """``solve_take``'s progress argument where it has one (stage and share done, 0 to 1)."""
+    import inspect
+
+    from .core.pipeline import solve_take
+
+    return {"progress": bar} if "progress" in inspect.signature(solve_take).parameters else {}
+
+
 def _solve(args) -> int:
-    from .core.atomic import atomic_output
     from .core.errors import MocapInputError
     from .core.hand.calibrate import Calibration
     from .core.hands import HandNaming, sided_path, split_hands
@@ -472,9 +597,11 @@ def _solve(args) -> int:
         bpy = _bpy_or_none("solve --blend/--fbx/--bvh")
         if bpy is None:
             return EXIT_FAILED
+    bar = _ProgressBar.for_args(args)
     try:
         layout = load_layout(args.layout)
         calibrations = [Calibration.load(p) for p in args.calibration.split(",")] if args.calibration else []
+        bar.stage(f"reading {args.file}")
         take = read_take(args.file)
         if reference is not None and reference.stop > take.n_frames:
             raise MocapInputError(args.file, f"has {take.n_frames} frames; --reference-frames ends at {reference.stop}")
@@ -485,10 +612,14 @@ def _solve(args) -> int:
         by_side = {("" if len(sides) == 1 and not sides[0] else c.side): c for c in calibrations}
         if len(calibrations) > len(sides) or len(by_side) < len(calibrations):
             raise MocapInputError(args.calibration, f"give one calibration per hand ({len(sides)} in the take)")
+        bar.stage("calibrating and solving the hand" if len(by_side) < len(sides) else "solving the hand")
         solved = solve_hands(take, layout, naming, by_side, calibrate_seconds=args.calibrate_seconds,
-                             reference=reference, contacts=contacts, side=args.side, smooth_hz=args.smooth_hz)
+                             reference=reference, contacts=contacts, side=args.side, smooth_hz=args.smooth_hz,
+                             **_solve_progress(bar))
     except Exception as exc:
+        bar.close()
         return _fail(args.file, exc)
+    bar.close()
     reports = []
     for side, one in solved:
         report = one.report() | {"file": args.file} | ({"side": side} if side else {})
@@ -508,18 +639,33 @@ def _solve(args) -> int:
             print(f"  calibration {path}")
     if bpy is not None:
         from .blender.export import write_solved_scene
+        from .core.quiet import silenced_stdout
 
         try:  # the labeled markers beside the calibrated, animated rig(s); then .blend, FBX and BVH
             rigs = solved if solved[0][0] else solved[0][1]
-            for kind, path in write_solved_scene(take, rigs, args.blend, args.fbx, args.bvh).items():
+            with silenced_stdout():  # Blender's and the exporters' own lines name the temporary files
+                written = write_solved_scene(take, rigs, args.blend, args.fbx, args.bvh)
+            for kind, path in written.items():
                 print(f"  {kind:8s} {path}")
         except Exception as exc:
             return _fail(args.file, exc)
     if args.report:
-        with atomic_output(args.report) as tmp, open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(reports[0] if len(reports) == 1 else {"file": args.file, "hands": reports}, fh, indent=1)
-        print(f"  report   {args.report}")
+        try:
+            _write_report(args.report, reports[0] if len(reports) == 1 else {"file": args.file, "hands": reports})
+        except OSError as exc:
+            return _fail(args.file, exc)
     return EXIT_OK
+
+
+def _write_report(path: str, report: dict) -> None:
+    """``report`` as JSON at ``path``, whole or not at all (a folder or unwritable path raises OSError)."""
+    from .core.atomic import atomic_output
+
+    if os.path.isdir(path):  # else the rename fails with a confusing temporary name in the message
+        raise IsADirectoryError(21, "is a folder; give a file name for the report", path)
+    with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(report, fh, indent=1)
+    print(f"  report   {path}")
 
 
 def _batch(args) -> int:
@@ -666,6 +812,7 @@ def _synth_blend(synth, path: str) -> int:
     from .blender.armature import build_hand, key_poses
     from .blender.export import save_blend
     from .blender.scene import ImportOptions, build_take
+    from .core.quiet import silenced_stdout
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
@@ -674,7 +821,8 @@ def _synth_blend(synth, path: str) -> int:
     scene.collection.children.link(truth)
     objs = build_hand(synth.hand, name="TrueHand", collection=truth, layout=synth.layout)
     key_poses(objs["armature"], synth.hand, synth.poses, first_frame=synth.take.first_frame)
-    save_blend(path)
+    with silenced_stdout():
+        save_blend(path)
     print(f"  blend    {path}")
     return EXIT_OK
 

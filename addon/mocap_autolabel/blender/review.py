@@ -489,13 +489,15 @@ class LabelRequest:
     def run(self, say=None, check_layout: bool = False) -> Labeling:
         """The labeling; with ``check_layout``, ``info["layout_doubt"]`` (a :class:`LayoutDoubt` as a
         dict) says when another layout fits the take clearly better (a re-solve keeps what the
-        labeling it replaces said).
+        labeling it replaces said), and a take in which no hand is found (the CLI's and batch's
+        rule, :func:`.core.pipeline.hand_checks`) raises :class:`MocapInputError`: nothing is built.
 
         ``say(message)`` hears each stage as it starts (``"scoring 1200 frames with set (stage 2 of
         3)"``); :attr:`stage` holds that line and :attr:`done` the share of the work done before it
         (:func:`core.review.stage_progress`).
         """
-        from ..core.pipeline import label_take, layout_doubt
+        from ..core.errors import MocapInputError
+        from ..core.pipeline import hand_checks, label_take, layout_doubt
         from ..core.review import stage_progress
 
         track = stage_progress(check_layout)
@@ -510,7 +512,11 @@ class LabelRequest:
                               labeler=self.labeler, progress=staged)
         if check_layout:
             staged("checking the layout against the other built-in layouts")
-            doubt = layout_doubt(self.take, self.layout, labeling)
+            one = labeling.info.get("hands", {}).get("count", 1) == 1
+            doubt = layout_doubt(self.take, self.layout, labeling) if one else None
+            checks = hand_checks(self.take, self.layout, labeling, doubt)
+            if not any(check.found for _, check in checks):
+                raise MocapInputError(self.take_name, checks[0][1].describe("Layout {} in the Mocap tab"))
             doubt = asdict(doubt) if doubt else None
         else:
             doubt = self.previous.info.get("layout_doubt") if self.previous is not None else None

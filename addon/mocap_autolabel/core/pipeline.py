@@ -91,10 +91,13 @@ def _crossings(take: Take) -> dict[int, list[int]]:
 def _labeler(method: str, layout: Layout, model, fit: np.ndarray | None, start: np.ndarray | None, take: Take,
              batch):
     if method == "gmm":
-        if fit is None:
-            raise MocapInputError(take.source, "the gmm method needs a labeled take of the subject to fit on")
+        if fit is None:  # no take of the performer: the layout's synthetic range of motion stands in
+            return _matched_side(_rom_gmm(layout), batch)
         lab = make_labeler("gmm", layout)
-        lab.fit(fit)
+        try:
+            lab.fit(fit)
+        except ValueError as exc:  # the fitting take lacks what the GMMs need (the rigid triangle, samples)
+            raise MocapInputError("--fit", f"cannot fit gmm on this labeled take: {exc}") from None
         return lab
     if method == "nearest":
         if start is None:  # seed the tracker with our own labels of the first frame that has points
@@ -107,6 +110,59 @@ def _labeler(method: str, layout: Layout, model, fit: np.ndarray | None, start: 
             start[labels[0][ok]] = batch.points[first][ok]
         return make_labeler("nearest", layout, start=start)
     return make_labeler(method, layout, model)
+
+
+#: ``gmm`` labelers fitted on a layout's synthetic range of motion, by layout name and content: a
+#: fit takes seconds, and batch runs and Blender re-solves label many takes with one layout.
+_ROM_GMMS: dict[tuple[str, str], Labeler] = {}
+#: Hand sizes (relative to the range of motion's average hand) and sides tried for a take labeled
+#: by a range-of-motion ``gmm``: its Gaussians sit in metres in the back-of-hand frame, so a hand
+#: 10 % smaller than the fitted one leaves its markers outside them (two synthetic takes of
+#: 0.165 and 0.171 m hands: 2.6 and 0.0 % right unscaled).
+ROM_SCALES = (0.88, 0.94, 1.0, 1.06, 1.12)
+
+
+def _rom_gmm(layout: Layout) -> Labeler:
+    """A right-hand ``gmm`` labeler fitted on ``layout``'s synthetic range of motion (cached)."""
+    from .synth.generate import range_of_motion
+
+    key = (layout.name, repr(layout.names))
+    if key not in _ROM_GMMS:
+        _ROM_GMMS[key] = make_labeler("gmm", layout).fit(range_of_motion(layout, side="right"))
+    return _ROM_GMMS[key]
+
+
+class _Fitted(Labeler):
+    """Another labeler's scores of the take brought to the hand it was fitted on: positions divided
+    by ``scale`` and, for a left hand, mirrored in x (the model's hands are exact mirrors, so one
+    right-hand fit serves both sides)."""
+
+    def __init__(self, inner: Labeler, scale: float = 1.0, mirror: bool = False) -> None:
+        self.inner, self.layout, self.name = inner, inner.layout, inner.name
+        self.factor = np.array([-1.0 if mirror else 1.0, 1.0, 1.0]) / scale
+
+    def scores(self, points: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        return self.inner.scores((points * self.factor).astype(points.dtype), mask)
+
+
+def _matched_side(labeler: Labeler, batch: FrameBatch, sample: int = 100) -> Labeler:
+    """``labeler`` (fitted on the average right hand) scaled and mirrored as best fits up to
+    ``sample`` frames spread over the take, judged by the total score of each frame's best
+    assignment: hand size and side are not known before labeling. (The count of labeled points
+    picked the wrong side of a left-hand take: 7.9 % right against 62.2 % mirrored.)"""
+    rows = np.unique(np.linspace(0, len(batch.mask) - 1, min(sample, len(batch.mask))).astype(int))
+    points, mask = batch.points[rows], batch.mask[rows]
+    best, best_total = labeler, -np.inf
+    for mirror in (False, True):
+        for scale in ROM_SCALES:
+            candidate = _Fitted(labeler, scale, mirror)
+            scores = candidate.scores(points, mask)
+            labels, _ = assign(scores, mask)
+            col = np.where(labels >= 0, labels, scores.shape[2] - 1)
+            total = np.take_along_axis(scores, col[..., None], axis=2)[..., 0][mask].sum()
+            if total > best_total:
+                best, best_total = candidate, total
+    return best
 
 
 def _apply_constraints(scores: np.ndarray, slots: np.ndarray, mask: np.ndarray,
@@ -297,7 +353,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                validate: bool = False, hand: Calibration | None = None, splits: Sequence[tuple[int, int]] = (),
                null_prior: tuple[float, float] | None = None, switch_cost: tuple[float, float] | None = None,
                partner: tuple[float, float] | None = None, continuity: tuple[float, float] | None = None,
-               progress: Callable[[str], None] | None = None, hands: str | int = "auto",
+               progress: Callable[[str], None] | None = None,
+               done: Callable[[float], None] | None = None, hands: str | int = "auto",
                sides: Sequence[str] | None = None, naming: HandNaming | str | None = None,
                keep_named: bool = True) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
@@ -339,6 +396,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             the first vote with the partners' evidence. Default: the one fitted for this method
             and layout, shipped beside the null prior.
         progress: called with a short message at each stage.
+        done: called with the share of the work done (0 to 1) as it goes: per batch of frames
+            while an ONNX model scores them (most of the time of a long take), then per stage.
         hands: ``"auto"`` finds how many hands of ``layout`` the take holds (:func:`.hands.find_hands`);
             1 or 2 force it. Two hands are labeled jointly: ``2M`` labels, the left hand's first,
             named with ``naming``'s side tokens; no trajectory takes labels of both hands at once.
@@ -367,6 +426,10 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if validate and temporal != "vote":
         raise ValueError("validate needs temporal='vote'")
     say = progress or (lambda _msg: None)
+    share = done or (lambda _share: None)
+    # Shares of the work at each stage's start: scoring is most of a take's time with the ONNX
+    # models (0.3 s of 0.45 s for the 1,200-frame demo take); validation costs a hand calibration.
+    scored, decided = (0.5, 0.7) if validate else (0.7, 1.0)
     times: dict[str, float] = {}
     t0 = time.perf_counter()
 
@@ -401,12 +464,21 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
 
     say(f"scoring {take.n_frames} frames with {method}")
     t = time.perf_counter()
+    share(0.02)
     if found.count == 2:
         labeler = labeler or make_labeler(method, layout, model)
         joint = scores = _two_hand_scores(take_in, layout, found, batch, labeler)
     else:
         labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
-        scores = labeler.scores(points, mask)
+        hooked = done is not None and hasattr(labeler, "on_batch")
+        if hooked:  # ONNX labelers report each batch of frames
+            labeler.on_batch = lambda part: share(0.02 + (scored - 0.02) * part)
+        try:
+            scores = labeler.scores(points, mask)
+        finally:
+            if hooked:
+                labeler.on_batch = None
+    share(scored)
     scores = _apply_constraints(scores, slots, mask, constraints)
     times["scores"] = time.perf_counter() - t
 
@@ -458,6 +530,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             labeling = decide(scores)
             times["hands_again"] = time.perf_counter() - t
         info["hands_offered_again"] = offered
+    share(decided)
     if validate:
         say("validating with the hand fit")
         t = time.perf_counter()
@@ -487,7 +560,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             if two < one + CLEARLY_BETTER / 3:
                 single.info["hands"].update(two_hands_rejected={"two": round(two, 4), "one": round(one, 4)})
                 single.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
+                share(1.0)
                 return single
+    share(1.0)
     times["total"] = time.perf_counter() - t0
     info["seconds"] = {key: round(v, 4) for key, v in times.items()}
     return labeling
@@ -557,6 +632,8 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
         labeling.confidence = calibration(labeling.evidence, labeled=labeling.label >= 0)
     labeling.confidence[labeling.locked] = 1.0
     info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
+    if calibration is not None and calibration.never_sure:
+        info["never_confident"] = True  # front ends say why every segment is uncertain
     return labeling
 
 
@@ -627,6 +704,108 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
     if shares[best] - own < CLEARLY_BETTER:
         return None
     return LayoutDoubt(layout.name, float(share), best, float(shares[best]))
+
+
+#: A hand is "found" when at least this share of frames has at least half the layout labeled, all
+#: within HAND_REACH (metres) of their median: a hand is about 0.2 m long, a body capture labeled
+#: as a hand spreads its "labels" over half a metre or more.
+HAND_FRAMES, HAND_REACH = 0.3, 0.25
+#: A labeled marker counts towards "a hand is here" only if its segment's mean per-frame
+#: probability (its calibrated confidence for :data:`LOW_PROBABILITY` methods) is at least this: a
+#: full-body capture labeled with a hand layout gets labels, but ones its labeler does not believe
+#: (``set``: median 0.26 on ezc3d's Vicon.c3d; 0.98 and up on hands).
+BELIEVED = 0.5
+#: Methods whose per-frame probabilities are low even where they are right (median 0.25 for
+#: ``perm`` and 0.39 for ``cnn`` on the demo take, which they label 92 % right): their segments are
+#: believed by calibrated confidence, which there reaches 0.5 in every frame. Not for ``set``: a
+#: han19 take labeled with glove13 has calibrated confidences of 0.5 on labels that are wrong.
+LOW_PROBABILITY = ("perm", "cnn")
+
+
+@dataclass(frozen=True)
+class HandCheck:
+    """Whether a labeled take holds a hand: ``share`` of its frames look like one (see
+    :data:`HAND_FRAMES`); ``better`` names a layout that fits clearly better, if one does.
+    ``str()`` of a failed check is the one-line reason, for errors in the CLI, batch and Blender."""
+
+    share: float
+    layout: str
+    better: str | None = None
+
+    @property
+    def found(self) -> bool:
+        return self.share >= HAND_FRAMES
+
+    def __str__(self) -> str:
+        return self.describe()
+
+    def describe(self, use: str = "--layout {}") -> str:
+        """The one line; ``use`` says how to pick the better layout where one fits (the command
+        line's flag by default; Blender names its panel field)."""
+        if self.found:
+            return f"a hand in {100 * self.share:.0f} % of frames"
+        hint = (f"'{self.better}' fits better: use {use.format(self.better)}" if self.better else
+                f"is this a {self.layout} take?")
+        return (f"no hand found: only {100 * self.share:.0f} % of frames have half of the {self.layout} markers "
+                f"labeled with some confidence within {HAND_REACH:g} m of each other ({hint})")
+
+
+def _believed(labeling: Labeling, m: int) -> np.ndarray:
+    """bool ``(F, M)``: where each label sits on a segment whose mean probability (calibrated
+    confidence for :data:`LOW_PROBABILITY` methods) reaches :data:`BELIEVED`."""
+    seg = labeling.segment_ids()  # (F, P)
+    frame, slot = np.nonzero(seg >= 0)
+    s = seg[frame, slot]
+    low = labeling.info.get("method") in LOW_PROBABILITY
+    belief = labeling.confidence if low else labeling.evidence[:, 0]
+    keep = (labeling.label[s] >= 0) & (belief[s] >= BELIEVED)
+    out = np.zeros((labeling.n_frames, m), dtype=bool)
+    out[frame[keep], labeling.label[s[keep]]] = True
+    return out
+
+
+def hand_share(markers: np.ndarray, believed: np.ndarray | None = None) -> float:
+    """Share of frames whose labeled markers ``(F, M, 3)`` (metres, NaN = not labeled) look like one
+    hand: at least half of the M labeled, all within :data:`HAND_REACH` of their median.
+    ``believed`` ``(F, M)`` bool keeps only those markers (see :data:`BELIEVED`)."""
+    import warnings
+
+    if believed is not None:
+        markers = np.where(believed[..., None], markers, np.nan)
+    if not len(markers):
+        return 0.0
+    count = np.isfinite(markers[..., 0]).sum(axis=1)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # frames with no labeled marker
+        centre = np.nanmedian(markers, axis=1, keepdims=True)
+        reach = np.nanmax(np.linalg.norm(markers - centre, axis=2), axis=1)
+    return float(((count >= markers.shape[1] / 2) & (reach <= HAND_REACH)).mean())
+
+
+def check_hand(take: Take, layout: Layout, labeling: Labeling, doubt: LayoutDoubt | None = None,
+               labeled: Take | None = None) -> HandCheck:
+    """The no-hand rule the CLI, batch and Blender share: a labeling of ``take`` in which under
+    :data:`HAND_FRAMES` of the frames hold half of ``layout``'s markers, believed and within
+    :data:`HAND_REACH` of each other, found no hand (a body capture, a prop, the wrong layout),
+    however many labels it gave. ``doubt`` (from :func:`layout_doubt`) names the better layout;
+    ``labeled``, ``labeled_take(take, labeling)`` where the caller has it already."""
+    from .labeling import labeled_take
+
+    m = len(layout)
+    markers = (labeled if labeled is not None else labeled_take(take, labeling)).positions[:, :m]
+    return HandCheck(hand_share(markers, _believed(labeling, m)), layout.name, doubt.better if doubt else None)
+
+
+def hand_checks(take: Take, layout: Layout, labeling: Labeling,
+                doubt: LayoutDoubt | None = None) -> list[tuple[str, HandCheck]]:
+    """:func:`check_hand` per hand: ``[("", check)]`` for one hand, ``[("left", ...), ("right", ...)]``
+    for a two-hand labeling (each hand's labels on their own)."""
+    hands = labeling.info.get("hands", {})
+    if hands.get("count", 1) < 2:
+        return [("", check_hand(take, layout, labeling, doubt))]
+    m = len(layout)
+    return [(side, check_hand(take, layout, labeling.label_range(h * m, (h + 1) * m), doubt))
+            for h, side in enumerate(hands["sides"])]
 
 
 @dataclass

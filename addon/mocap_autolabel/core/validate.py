@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import MocapInputError
 from .hand.calibrate import Calibration, calibrate
 from .hand.ik import GATE, MIN_MARKERS, Fit
 from .labeling import Labeling, labeled_take
@@ -32,6 +33,10 @@ def fit_labeling(take: Take, layout: Layout, labeling: Labeling, calibration: Ca
     Returns the calibration and the :class:`Fit` of the second, outlier-free solve.
     """
     observed = labeled_take(take, labeling).positions[:, :len(layout)].astype(float)
+    if not (np.isfinite(observed[..., 0]).sum(axis=1) >= MIN_MARKERS).any():
+        # A take with no hand (a body capture) gets here; say so rather than fail inside the solver.
+        raise MocapInputError(take.source, f"IK validation: no frame has {MIN_MARKERS} or more {layout.name} markers "
+                                           f"labeled to fit the hand to: no hand found (is this a {layout.name} take?)")
     if calibration is None:
         conf = np.full(observed.shape[:2], -1.0)
         per, pconf = labeling.per_sample(), labeling.per_sample_confidence()

@@ -271,6 +271,11 @@ class MOCAPAL_OT_label(bpy.types.Operator):
                               + (f"; {plural(kept, 'correction')} kept" if kept else ""))
         if s["layout_doubt"]:
             self.report({"WARNING"}, f"{request.take_name}: {s['layout_doubt']}")
+        from ..core.pipeline import time_limit_warning
+
+        hurried = time_limit_warning(labeling)  # as the CLI and batch warn
+        if hurried:
+            self.report({"WARNING"}, f"{request.take_name}: {hurried}")
         return {"FINISHED"}
 
     @staticmethod

@@ -9,6 +9,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import threading
+from collections.abc import Callable
 
 import numpy as np
 
@@ -91,6 +93,8 @@ class OnnxLabeler(Labeler):
         except Exception as e:  # onnxruntime raises its own types for bad graphs
             raise MocapInputError(self.path, f"not a usable ONNX model ({str(e).splitlines()[0]})") from None
         self.batch = batch
+        #: Called with the share of frames scored (0 to 1) after each batch, if set: progress bars.
+        self.on_batch: Callable[[float], None] | None = None
 
     def scores(self, points: np.ndarray, mask: np.ndarray) -> np.ndarray:
         frames, k, _ = points.shape
@@ -116,6 +120,18 @@ class OnnxLabeler(Labeler):
             out[rows[:, None], cols] = scores[:, :cols.shape[1]]
 
         starts = range(0, frames, self.batch)
+        if self.on_batch is not None:
+            report, lock, finished = self.on_batch, threading.Lock(), [0]
+            step = max(1, len(starts) // 100)  # about a hundred calls, whatever the take's length
+
+            def run_and_report(s: int, inner=run) -> None:
+                inner(s)
+                with lock:
+                    finished[0] += 1
+                    if finished[0] % step == 0 or finished[0] == len(starts):
+                        report(finished[0] / len(starts))
+
+            run = run_and_report
         if self.workers > 1 and len(starts) > 1:
             from concurrent.futures import ThreadPoolExecutor
 

@@ -512,3 +512,11 @@ def touch(hand: HandModel, poses: np.ndarray, finger: str, bone: str = "dist", a
         out[:, free] = moved[:, free]  # only the two digits bend; the hand stays where it was
     pads = solver.markers(out)
     return out, np.linalg.norm(pads[:, 0] - pads[:, 1], axis=1)
+
+
+def range_of_motion(layout: Layout, frames: int = 1200, seed: int = 0, side: str = "right") -> np.ndarray:
+    """The layout's markers ``(frames, M, 3)`` (metres, layout order, no gaps or noise) on the
+    model's average hand moving through the generator's random motion (canonical poses,
+    synergies, uniform samples): a labeled take of no one in particular, for labelers that must
+    be fitted on one (``gmm``) when the performer's own is not given."""
+    return marker_motion(layout, HandModel(side=side), frames, seed=seed)[1]

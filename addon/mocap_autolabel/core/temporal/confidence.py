@@ -113,6 +113,13 @@ class Calibration:
                 out[sel] = np.where(sure, np.maximum(y, SURE), np.minimum(y, SURE - 1e-3))
         return out
 
+    @property
+    def never_sure(self) -> bool:
+        """True when no segment can reach :data:`SURE`: on the validation takes no score band of
+        this method's segments was right :data:`SURE_ACCURACY` of the time (``perm`` and ``cnn``:
+        every segment is left for review, and that is the honest answer)."""
+        return all(s > 1.0 for s in self.sure)
+
     def as_dict(self) -> dict:
         return {"length_edges": list(LENGTH_EDGES), "evidence": list(EVIDENCE), "weights": self.weights,
                 "x": self.x, "y": self.y, "sure": self.sure, "sure_accuracy": SURE_ACCURACY,
