@@ -255,3 +255,37 @@ def test_every_readme_batch_example_runs_as_written(tmp_path):
 def _write(path: Path, text: str) -> str:
     path.write_text(text, encoding="utf-8")
     return str(path)
+
+
+def test_a_folder_of_one_and_two_hand_takes(tmp_path, bpy_module):
+    from mocap_autolabel.core.hands import split_hands
+    from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take
+
+    takes = tmp_path / "takes"
+    _synthetic(takes, 1, frames=300)
+    han19 = load_layout("han19")
+    write_c3d(two_hand_take(han19, 300, seed=3, config=TwoHandConfig(close_share=0.0)).take, takes / "two.c3d")
+    # Two forced on a one-hand take: labeled as the one hand it holds, and said.
+    write_c3d(synthesize(han19, 300, seed=9).take, takes / "forced.c3d")
+    out = tmp_path / "out"
+    settings = BatchSettings(fbx=True)
+    summary = run_batch([str(takes)], str(out), settings, progress="none")
+    assert summary["ok"] == 3, summary["takes_detail"]
+    two = json.loads((out / "two.report.json").read_text())
+    assert two["hands"] == 2 and [h["side"] for h in two["per_hand"]] == ["left", "right"]
+    assert all(h["labels_present"] == 19 and h["confident_share"] > 0.5 for h in two["per_hand"])
+    assert [h["side"] for h in two["hands_solved"]] == ["left", "right"]
+    assert two["outputs"] == {"labeled": "two.labeled.c3d", "fbx_left": "two_left.fbx", "fbx_right": "two_right.fbx"}
+    assert {s for s, _ in split_hands(read_take(out / "two.labeled.c3d"), han19)} == {"left", "right"}
+    one = json.loads((out / "synth0.report.json").read_text())
+    assert one["hands"] == 1 and "per_hand" not in one and one["outputs"]["fbx"] == "synth0.fbx"
+    rows = {r["name"]: r for r in summary["takes_detail"]}
+    assert rows["two"]["sides"] == "left right" and rows["synth0"]["hands"] == 1
+    # A rerun finds every take complete, the two-hand one with its per-hand rig files included.
+    again = run_batch([str(takes)], str(out), settings, progress="none")
+    assert again["skipped"] == 3
+    (out / "two_right.fbx").unlink()
+    assert run_batch([str(takes)], str(out), settings, progress="none")["skipped"] == 2
+    forced = run_batch([str(takes / "forced.c3d")], str(tmp_path / "forced"), BatchSettings(hands="2"),
+                       progress="none")
+    assert forced["ok"] == 1 and "two hands were forced, one was found" in forced["takes_detail"][0]["warning"]

@@ -42,6 +42,9 @@ class BatchSettings:
         blend, fbx, bvh: also write these per take (need Blender or the bpy module).
         jobs: takes processed side by side (processes).
         force: redo takes whose outputs are already complete.
+        hands: ``auto`` (find how many hands each take holds), ``1`` or ``2``.
+        hand_names: how two hands' labels carry their side (see ``label --hand-names``).
+        calibration: with two hands, one calibration per side may be given as ``"left.json,right.json"``.
     """
 
     layout: str = "han19"
@@ -57,6 +60,8 @@ class BatchSettings:
     bvh: bool = False
     jobs: int = 1
     force: bool = False
+    hands: str = "auto"
+    hand_names: str | None = None
     extra: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -78,7 +83,9 @@ class BatchSettings:
         base = os.path.dirname(os.path.abspath(path))
         for key in ("model", "calibration"):
             if data.get(key):
-                data[key] = os.path.join(base, data[key])
+                data[key] = ",".join(os.path.join(base, p.strip()) for p in str(data[key]).split(","))
+        if "hands" in data:
+            data["hands"] = str(data["hands"])
         if str(data.get("layout", "")).endswith(".toml"):
             data["layout"] = os.path.join(base, data["layout"])
         return cls(**data)
@@ -134,8 +141,15 @@ def _finished(out_dir: str, name: str, settings: BatchSettings) -> dict | None:
         return None
     if report.get("status") != "ok":
         return None
-    if not all(os.path.isfile(os.path.join(out_dir, name + s)) for s in settings.outputs()):
+    outputs = report.get("outputs", {})
+    if not os.path.isfile(os.path.join(out_dir, name + ".labeled.c3d")):
         return None
+    if not all(os.path.isfile(os.path.join(out_dir, f)) for f in outputs.values()):
+        return None
+    # Every rig file asked for now was written then (one per hand for a take of two hands).
+    for kind in ("blend", "fbx", "bvh"):
+        if getattr(settings, kind) and not any(k == kind or k.startswith(kind + "_") for k in outputs):
+            return None
     return report
 
 
@@ -183,35 +197,60 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
 
     from .core.errors import MocapInputError
     from .core.formats.c3d import write_c3d
+    from .core.hands import HandNaming
     from .core.labeling import labeled_take, unlabeled_point_names
     from .core.layout import load_layout
-    from .core.pipeline import check_hand, label_take, layout_doubt, solve_take, time_limit_warning
+    from .core.pipeline import hand_checks, label_take, layout_doubt, solve_hands, time_limit_warning
     from .core.take import read_take
 
     t = time.perf_counter()
     layout = load_layout(settings.layout)
     take = read_take(path)
     timings["read"] = round(time.perf_counter() - t, 4)
-    hand_cal = None
+    calibrations = {}
     if settings.calibration:
         from .core.hand.calibrate import Calibration
 
-        hand_cal = Calibration.load(settings.calibration)
-        hand_cal.check(layout, settings.calibration)
+        for file in settings.calibration.split(","):
+            cal = Calibration.load(file)
+            cal.check(layout, file)
+            calibrations[cal.side] = cal
+    naming = HandNaming(settings.hand_names) if settings.hand_names else None
     t = time.perf_counter()
+    one_cal = next(iter(calibrations.values())) if len(calibrations) == 1 else None
     labeling = label_take(take, layout, method=settings.method, temporal=settings.temporal, model=settings.model,
-                          validate=settings.validate, hand=hand_cal)
+                          validate=settings.validate, hand=one_cal, hands=settings.hands, naming=naming)
     timings["label"] = round(time.perf_counter() - t, 4)
     labeled = labeled_take(take, labeling)
-    doubt = layout_doubt(take, layout, labeling, settings.confident)
-    hand = check_hand(take, layout, labeling, doubt, labeled)
-    if not hand.found:
-        raise MocapInputError(path, str(hand))
+    facts = labeling.info["hands"]
+    two = facts["count"] == 2
+    doubt = None if two else layout_doubt(take, layout, labeling, settings.confident)
+    checks = hand_checks(take, layout, labeling, doubt)
+    if not any(check.found for _, check in checks):
+        raise MocapInputError(path, "; ".join(f"{side} hand: {check}" if side else str(check)
+                                              for side, check in checks))
     out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
-           "hand_frames": round(hand.share, 4), "summary": labeling.summary(
-               settings.confident, take.first_frame, unlabeled_point_names(take.names, layout.names)),
+           "hand_frames": round(max(check.share for _, check in checks), 4), "hands": facts["count"],
+           "summary": labeling.summary(settings.confident, take.first_frame,
+                                       unlabeled_point_names(take.names, labeling.names)),
            "outputs": {}}
+    if two or "sides" in facts:
+        m = len(layout)
+        out["per_hand"] = []
+        for h, (side, check) in enumerate(checks):
+            part = labeling.label_range(h * m, (h + 1) * m) if two else labeling
+            summary = part.summary(settings.confident)
+            out["per_hand"].append({"side": side or facts["sides"][0], "hand_frames": round(check.share, 4),
+                                    "labels_present": int(len(set(part.label[part.label >= 0].tolist()))),
+                                    "confident_share": round(summary["confident_share"], 4),
+                                    "uncertain_segments": len(summary["uncertain_segments"])})
+        out["sides_confidence"] = facts.get("confidence")
     said = [str(w) for w in (doubt, time_limit_warning(labeling)) if w]
+    said += [f"{side} hand: {check}" for side, check in checks if not check.found]
+    if facts.get("forced") == 2:
+        said.append("two hands were forced, one was found")
+    if facts.get("warning"):
+        said.append(facts["warning"])
     if said:
         out["warning"] = "; ".join(said)
     t = time.perf_counter()
@@ -221,14 +260,23 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     timings["write"] = round(time.perf_counter() - t, 4)
     if settings.solve_hand or settings.needs_blender():
         t = time.perf_counter()
-        solved = solve_take(labeled, layout, calibration=hand_cal)
+        solved = solve_hands(labeled, layout, naming, calibrations if two else
+                             ({"": one_cal} if one_cal is not None else None))
         timings["solve"] = round(time.perf_counter() - t, 4)
-        rep = solved.report()
-        rep.pop("per_frame_rms_mm")
-        out["hand"] = rep
+        reports = []
+        for side, one in solved:
+            rep = one.report()
+            rep.pop("per_frame_rms_mm")
+            reports.append(rep | ({"side": side} if side else {}))
+        if two:
+            out["hands_solved"] = reports
+            out["hand"] = {"marker_rms_mm": round(max(r["marker_rms_mm"] for r in reports), 4)}  # the worse hand
+        else:
+            out["hand"] = reports[0]
         if settings.needs_blender():
             t = time.perf_counter()
-            out["outputs"].update(_blender_outputs(labeled, solved, os.path.join(out_dir, name), settings))
+            rigs = solved if two else solved[0][1]
+            out["outputs"].update(_blender_outputs(labeled, rigs, os.path.join(out_dir, name), settings))
             timings["blender"] = round(time.perf_counter() - t, 4)
     return out
 
@@ -382,7 +430,8 @@ def _row(report: dict, skipped: bool) -> dict:
     hand = report.get("hand") or {}
     return {"name": report.get("name"), "file": report.get("file"), "status": report.get("status"),
             "skipped": skipped, "error": report.get("error", ""), "warning": report.get("warning", ""),
-            "frames": report.get("frames"),
+            "frames": report.get("frames"), "hands": report.get("hands"),
+            "sides": " ".join(h["side"] for h in report.get("per_hand", [])),
             "confident_share": round(summary["confident_share"], 4) if "confident_share" in summary else None,
             "uncertain_segments": len(summary.get("uncertain_segments", [])) if summary else None,
             "marker_rms_mm": hand.get("marker_rms_mm"),
@@ -395,8 +444,8 @@ def _write_summary(out_dir: str, summary: dict) -> None:
     with atomic_output(os.path.join(out_dir, "summary.json")) as tmp, open(tmp, "w", encoding="utf-8") as f:
         json.dump(summary, f, indent=1)
     buf = io.StringIO()
-    cols = ["name", "status", "skipped", "frames", "confident_share", "uncertain_segments", "marker_rms_mm",
-            "seconds", "error", "warning", "file"]
+    cols = ["name", "status", "skipped", "frames", "hands", "sides", "confident_share", "uncertain_segments",
+            "marker_rms_mm", "seconds", "error", "warning", "file"]
     writer = csv.DictWriter(buf, cols, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(summary["takes_detail"])
@@ -408,10 +457,12 @@ def _write_summary(out_dir: str, summary: dict) -> None:
 def format_table(summary: dict) -> str:
     """The summary as a plain-text table for the terminal."""
     rows = summary["takes_detail"]
-    head = ("take", "status", "frames", "confident", "uncertain", "hand RMS mm", "s")
+    head = ("take", "status", "frames", "hands", "confident", "uncertain", "hand RMS mm", "s")
     body = [(r["name"], ("skipped" if r["skipped"] else r["status"]) + (" *" if r["error"] else " !" if r.get("warning")
                                                                          else ""),
-             str(r["frames"] or ""), "" if r["confident_share"] is None else f"{100 * r['confident_share']:.1f} %",
+             str(r["frames"] or ""), "" if not r.get("hands") else
+             (f"{r['hands']} ({r['sides']})" if r.get("sides") else str(r["hands"])),
+             "" if r["confident_share"] is None else f"{100 * r['confident_share']:.1f} %",
              "" if r["uncertain_segments"] is None else str(r["uncertain_segments"]),
              "" if r["marker_rms_mm"] is None else f"{r['marker_rms_mm']:.2f}", f"{r['seconds']:.1f}")
             for r in rows]

@@ -214,6 +214,9 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--fbx", action="store_true", default=None, help="also write an FBX per take (solves the hand)")
     bat.add_argument("--bvh", action="store_true", default=None, help="also write a BVH per take (solves the hand)")
     bat.add_argument("--jobs", type=int, help="takes processed side by side (default 1)")
+    bat.add_argument("--hands", choices=("auto", "1", "2"), help="hands per take: found (auto, default) or forced")
+    bat.add_argument("--hand-names", metavar="CONVENTION", help="how two hands' labels carry their side "
+                                                                "(see label --hand-names; default prefix, L_ThumbTip)")
     bat.add_argument("--force", action="store_true", default=None, help="redo takes whose outputs are complete")
     shown = bat.add_mutually_exclusive_group()
     shown.add_argument("--quiet", action="store_true", help="no progress, only the summary and errors")
@@ -677,7 +680,7 @@ def _batch(args) -> int:
         print(f"mocap_autolabel batch: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     for key in ("layout", "model", "method", "temporal", "validate", "confident", "solve_hand", "calibration",
-                "blend", "fbx", "bvh", "jobs", "force"):
+                "blend", "fbx", "bvh", "jobs", "force", "hands", "hand_names"):
         value = getattr(args, key)
         if value is not None:
             setattr(settings, key, value)
