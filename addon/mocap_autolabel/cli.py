@@ -464,7 +464,7 @@ def _label(args) -> int:
                               validate=args.validate, hand=hand, **_hand_options(args),
                               fit=labeled if args.method == "gmm" else None,
                               start=labeled[0] if (labeled is not None and args.method == "nearest") else None,
-                              progress=bar, done=bar.share, **_hand_options(args))
+                              progress=bar, done=bar.share)
         bar("checking the layout and the hand", 1.0)
         two = labeling.info["hands"]["count"] == 2
         doubt = None if two else layout_doubt(take, layout, labeling)
