@@ -358,13 +358,14 @@ def _label(args) -> int:
 
             write_c3d(labeled_take(take, labeling), args.output)
         solved = None
-        if args.blend and labeling.info["hands"]["count"] == 2:
-            raise ValueError("a review scene (--blend) holds one hand for now; the take holds two: label it "
-                             "with --hands 1, or write the labeled C3D (-o) and solve it (solve --blend)")
         if args.solve_hand:
-            from .core.pipeline import solve_take
+            from .core.hands import HandNaming
+            from .core.pipeline import solve_hands
 
-            solved = solve_take(labeled_take(take, labeling), layout)
+            naming = labeling.info["hands"].get("naming")
+            # One HandSolve for a plain one-hand take, else [(side, HandSolve)]: one rig per hand.
+            solved = solve_hands(labeled_take(take, labeling), layout, HandNaming(naming) if naming else None)
+            solved = solved[0][1] if [side for side, _ in solved] == [""] else solved
         if args.blend:
             from .blender.export import write_review_scene
 
@@ -400,7 +401,11 @@ def _label(args) -> int:
     if args.output:
         print(f"  labeled  {args.output}")
     if args.blend:
-        hand = f" and the solved hand (marker RMS {solved.fit.overall_rms() * 1000:.2f} mm)" if solved else ""
+        if isinstance(solved, list):
+            hand = " and the solved hands (marker RMS " + ", ".join(
+                f"{side} {one.fit.overall_rms() * 1000:.2f} mm" for side, one in solved) + ")"
+        else:
+            hand = f" and the solved hand (marker RMS {solved.fit.overall_rms() * 1000:.2f} mm)" if solved else ""
         print(f"  review   {args.blend}: labeled markers coloured by confidence{hand}")
     if args.report:
         with atomic_output(args.report) as tmp, open(tmp, "w", encoding="utf-8") as fh:

@@ -550,3 +550,31 @@ def sided_path(path: str, side: str) -> str:
 
     stem, ext = os.path.splitext(path)
     return f"{stem}_{side}{ext}"
+
+
+# --- a labeling's hands, for whoever shows or relabels it (the Blender review, a re-solve) ----------
+
+def labeling_sides(info: dict) -> list[str]:
+    """The side of each hand of a labeling, in label order, from its ``info``: ``["left", "right"]``
+    for two hands (labels ``0..M-1`` the left hand's, ``M..2M-1`` the right's), ``[""]`` for one
+    (its side, where one was named, stays in the names)."""
+    facts = info.get("hands", {}) if info else {}
+    if facts.get("count", 1) == 2:
+        return list(facts.get("sides") or SIDES)
+    return [""]
+
+
+def relabel_options(info: dict) -> dict:
+    """``label_take`` keywords that keep a labeling's hands when the take is labeled again with its
+    corrections: the count, each hand's side in :func:`find_hands`' order (so that no labeling run
+    is spent deciding them again and every correction's label keeps its hand) and the naming.
+    Empty for a one-hand labeling (labeled again as it was first, ``hands="auto"``)."""
+    facts = info.get("hands", {}) if info else {}
+    if facts.get("count", 1) != 2:
+        return {}
+    out: dict = {"hands": 2}
+    if facts.get("by_hand_order"):
+        out["sides"] = list(facts["by_hand_order"])
+    if facts.get("naming"):
+        out["naming"] = HandNaming(facts["naming"])
+    return out

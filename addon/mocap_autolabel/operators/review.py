@@ -268,7 +268,10 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         self.report({"INFO"}, f"Labeled {request.take_name} with {request.layout.name}: "
                               f"{s['labels']} labels, {s['confident']:.1f} % of labeled samples confident, "
                               f"{plural(s['uncertain'], 'uncertain segment')}"
+                              + (f"; {s['hands']}" if s["hands"] else "")
                               + (f"; {plural(kept, 'correction')} kept" if kept else ""))
+        if s["hands_warning"]:
+            self.report({"WARNING"}, f"{request.take_name}: {s['hands_warning']}")
         if s["layout_doubt"]:
             self.report({"WARNING"}, f"{request.take_name}: {s['layout_doubt']}")
         return {"FINISHED"}
