@@ -128,7 +128,7 @@ def test_label_gives_one_labeled_collection_per_hand(labeled, two_hands):
     assert {ends[0], ends[-1]} == {0, 1}
 
 
-def test_relabel_tools_work_across_both_hands_and_re_solve_keeps_them(labeled):
+def test_relabel_tools_work_across_both_hands_and_re_solve_keeps_them(labeled, capfd):
     from mocap_autolabel.blender.review import prepare_label, sample_index
 
     bpy, coll = labeled
@@ -173,6 +173,19 @@ def test_relabel_tools_work_across_both_hands_and_re_solve_keeps_them(labeled):
     # Labeling again (the Label button) keeps the two hands and the corrections too.
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     assert _state(coll).labeling.per_sample()[index, slot] == l_tip
+    assert [c.name for c in coll["mocap_labeled"].children] == ["Left hand", "Right hand"]
+    # Hands: One labels one hand: plain names, no hand collections, and the corrections naming a
+    # hand's labels are dropped with a warning (undo brings them back); Two brings both back.
+    capfd.readouterr()
+    assert bpy.ops.mocap_autolabel.label(hands="1") == {"FINISHED"}
+    assert "that han19 with one hand lacks, and are dropped" in capfd.readouterr().out
+    one = _state(coll)
+    assert one.labeling.names == load_layout("han19").names and not one.review.constraints
+    assert not coll["mocap_labeled"].children and len(coll["mocap_labeled"].objects) == M
+    assert "mocap_labeled_left" not in coll
+    scene.mocap_autolabel.hands = "2"  # the panel's setting
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    assert _state(coll).labeling.names == lab.names and len(_objects(coll)) == 2 * M
     assert [c.name for c in coll["mocap_labeled"].children] == ["Left hand", "Right hand"]
 
 

@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass, field
 import bpy
 import numpy as np
 
-from ..core.hands import labeling_sides, relabel_options
+from ..core.hands import HandNaming, labeling_sides, relabel_options, sided_layout_names
 from ..core.labeling import EMPTY, Labeling, unlabeled_point_names
 from ..core.layout import Layout, load_layout
 from ..core.review import (
@@ -530,6 +530,7 @@ class LabelRequest:
     #: label_take's hand keywords (:func:`core.hands.relabel_options`): a take labeled with two
     #: hands before keeps both and their sides, so its corrections keep their hands
     hand_options: dict = field(default_factory=dict)
+    hands_changed: bool = False  # labeled before with another count of hands
     #: the share of the run done (0-1), written by :meth:`run` as its stages start
     done: float = 0.0
     stage: str = ""
@@ -569,12 +570,15 @@ class LabelRequest:
 
 
 def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None, method: str | None = None,
-                  temporal: str | None = None) -> LabelRequest:
+                  temporal: str | None = None, hands: str = "auto") -> LabelRequest:
     """A labeling run for the take; settings default to those it was labeled with before.
 
     A take labeled before keeps its corrections when it is labeled again: with another layout,
     those naming a marker the new layout also has (by name), ghost decisions and splits are kept,
-    and the others are listed in the request's ``dropped`` for the caller to report.
+    and the others are listed in the request's ``dropped`` for the caller to report. A take labeled
+    with two hands keeps them and their sides (``hands="auto"``); ``hands`` ``"1"`` or ``"2"``
+    forces the count, and where that changes it, the corrections naming labels are dropped (a
+    hand's labels mean nothing to the other count) and reported the same way.
     """
     from ..core.labelers import make_labeler
     from .session import labeler
@@ -584,19 +588,30 @@ def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None
     method = method or (state.method if state else "set")
     temporal = temporal or (state.temporal if state else "vote")
     layout = load_layout(layout_ref)
-    keep = state is not None and (state.layout == layout_ref or state.labeling.names == layout.names)
+    hand_options = relabel_options(state.labeling.info) if state else {}
+    before = 2 if hand_options else 1
+    if str(hands) in ("1", "2") and int(hands) != (before if state else 0):
+        hand_options = {"hands": int(hands)}  # forced, and not what the take was labeled with
+    elif str(hands) in ("1", "2") and not hand_options:
+        hand_options = {"hands": int(hands)}
+    # The names the new labeling will have: a two-hand take's carry their sides (L_ThumbTip ...).
+    names = layout.names
+    if hand_options.get("hands") == 2:
+        names = sided_layout_names(layout, ["left", "right"], hand_options.get("naming", HandNaming()))
+    same_hands = state is not None and (2 if hand_options.get("hands") == 2 else 1) == before
+    keep = state is not None and (state.layout == layout_ref and same_hands or state.labeling.names == names)
     review = state.review if keep else Review()
     previous = state.labeling if keep else None
     dropped = []
     if state is not None and not keep:
-        review, dropped = remap_review(state.review, state.labeling.names, layout.names)
+        review, dropped = remap_review(state.review, state.labeling.names, names)
     take = current_take(take_coll)
     lab = None
     if method in ("set", "perm", "cnn"):
         lab = labeler(take_coll, method, layout, lambda: make_labeler(method, layout))
     return LabelRequest(take_coll.name, take, layout, layout_ref, method, temporal, review, previous, lab,
                         state.token if state else "", dropped, list(state.labeling.names) if state else [],
-                        relabel_options(state.labeling.info) if state else {})
+                        hand_options, state is not None and not same_hands)
 
 
 def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, request: LabelRequest,

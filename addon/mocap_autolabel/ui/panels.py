@@ -51,6 +51,7 @@ class MOCAPAL_PT_label(_Sidebar, bpy.types.Panel):
         col.prop(settings, "layout_file")
         col.prop(settings, "method")
         col.prop(settings, "temporal")
+        col.prop(settings, "hands")
         col.operator("mocap_autolabel.label", icon="SORTALPHA")
         col.operator("mocap_autolabel.solve_hand", icon="VIEW_PAN")
 
