@@ -115,6 +115,9 @@ def test_label_gives_one_labeled_collection_per_hand(labeled, two_hands):
         if "mocap_label" in obj:
             seen.add(int(obj["mocap_label"]) // M)
     assert seen == {0, 1}
+    # The timeline overview marks the worst frames of both hands; Worst Frames goes there.
+    assert [m for m in bpy.context.scene.timeline_markers if m.name.startswith(f"?{coll.name}:")]
+    assert bpy.ops.mocap_autolabel.jump_to_worst() == {"FINISHED"}
     # The overlay draws both hands: 38 points, sticks along each hand's digits, none across hands.
     index = 200
     bpy.context.scene.frame_set(index + int(coll["mocap_first"]))
@@ -156,6 +159,8 @@ def test_relabel_tools_work_across_both_hands_and_re_solve_keeps_them(labeled, c
     lab = _state(coll).labeling
     assert lab.per_sample()[index2, slot_l] == r_thumb and lab.per_sample()[index2, slot_r] == l_thumb
     corrections = list(_state(coll).review.constraints)
+    texts = [item.text for item in scene.mocap_autolabel.corrections]
+    assert any(t.startswith("L_IndexTip on ") for t in texts) and any(t.startswith("R_ThumbTip on ") for t in texts)
     assert {c.label for c in corrections} >= {l_tip, l_thumb, r_thumb}
     # Re-solve: the hands keep their sides (passed back, so no labeling run decides them again) and
     # every correction holds.
