@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass, field
 import bpy
 import numpy as np
 
-from ..core.hands import HandNaming, labeling_sides, relabel_options, sided_layout_names
+from ..core.hands import labeling_sides, relabel_plan
 from ..core.labeling import EMPTY, Labeling, unlabeled_point_names
 from ..core.layout import Layout, load_layout
 from ..core.review import (
@@ -588,18 +588,9 @@ def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None
     method = method or (state.method if state else "set")
     temporal = temporal or (state.temporal if state else "vote")
     layout = load_layout(layout_ref)
-    hand_options = relabel_options(state.labeling.info) if state else {}
-    before = 2 if hand_options else 1
-    if str(hands) in ("1", "2") and int(hands) != (before if state else 0):
-        hand_options = {"hands": int(hands)}  # forced, and not what the take was labeled with
-    elif str(hands) in ("1", "2") and not hand_options:
-        hand_options = {"hands": int(hands)}
-    # The names the new labeling will have: a two-hand take's carry their sides (L_ThumbTip ...).
-    names = layout.names
-    if hand_options.get("hands") == 2:
-        names = sided_layout_names(layout, ["left", "right"], hand_options.get("naming", HandNaming()))
-    same_hands = state is not None and (2 if hand_options.get("hands") == 2 else 1) == before
-    keep = state is not None and (state.layout == layout_ref and same_hands or state.labeling.names == names)
+    # A two-hand take stays two hands with its sides; names are those the new labeling will have.
+    hand_options, names, hands_changed = relabel_plan(state.labeling.info if state else None, layout, hands)
+    keep = state is not None and (state.layout == layout_ref and not hands_changed or state.labeling.names == names)
     review = state.review if keep else Review()
     previous = state.labeling if keep else None
     dropped = []
@@ -611,7 +602,7 @@ def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None
         lab = labeler(take_coll, method, layout, lambda: make_labeler(method, layout))
     return LabelRequest(take_coll.name, take, layout, layout_ref, method, temporal, review, previous, lab,
                         state.token if state else "", dropped, list(state.labeling.names) if state else [],
-                        hand_options, state is not None and not same_hands)
+                        hand_options, hands_changed)
 
 
 def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, request: LabelRequest,

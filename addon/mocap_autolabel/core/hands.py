@@ -564,6 +564,28 @@ def labeling_sides(info: dict) -> list[str]:
     return [""]
 
 
+def relabel_plan(info: dict | None, layout: Layout, hands: str | int = "auto") -> tuple[dict, list[str], bool]:
+    """How to label a take again that was labeled before with ``info`` (None: never labeled).
+
+    ``hands`` ``"auto"`` keeps a two-hand labeling's hands and sides (:func:`relabel_options`) and
+    lets a one-hand take be found again as the first labeling was; ``1`` / ``2`` force the count.
+
+    Returns:
+        ``label_take``'s hand keywords, the label names that labeling will have (where the count
+        is known: a one-hand take under ``"auto"`` may still be found to hold two), and whether the
+        count of hands changes (then the corrections that name a hand's labels cannot follow).
+    """
+    earlier = relabel_options(info) if info is not None else {}
+    options = earlier
+    if str(hands) in ("1", "2"):
+        n = int(hands)
+        options = earlier if n == 2 and earlier else {"hands": n}
+    two = options.get("hands") == 2
+    names = sided_layout_names(layout, list(SIDES), options.get("naming", HandNaming())) if two else list(layout.names)
+    changed = info is not None and two != bool(earlier)
+    return options, names, changed
+
+
 def relabel_options(info: dict) -> dict:
     """``label_take`` keywords that keep a labeling's hands when the take is labeled again with its
     corrections: the count, each hand's side in :func:`find_hands`' order (so that no labeling run
