@@ -90,7 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write a review scene: the raw take, labeled and unlabeled markers keyed by confidence "
                           "(open it in Blender with the add-on: Mocap tab > Review); needs Blender or bpy")
     lab.add_argument("--solve-hand", action="store_true",
-                     help="also fit the hand to the labels and put the keyed rig in --blend")
+                     help="also fit the hand to the labels and put the keyed rig in --blend (one rig per hand, "
+                          "Hand_L and Hand_R, for a take of two hands)")
 
     sol = sub.add_parser("solve", help="fit the rigged hand to a labeled take: calibration, IK, Blender/FBX/BVH")
     sol.add_argument("file", metavar="FILE", help="a labeled take (C3D, TRC or TSV) with the layout's marker names")
