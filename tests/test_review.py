@@ -150,3 +150,45 @@ def test_a_newer_label_replaces_an_older_constraint_on_another_slot(labeled):
         if c.slot == s1:
             assert c.stop <= second.start or c.start >= second.stop
     assert review.constraints[-1] == second and first.label == 9
+
+
+def test_remembering_labeler_serves_both_hands_of_a_re_solve():
+    """A two-hand take scores each hand's points on their own: a re-solve finds both remembered."""
+    from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take
+
+    layout = load_layout("han19")
+    take = two_hand_take(layout, 200, seed=3, config=TwoHandConfig(close_share=0.0)).take
+    inner = make_labeler("set", layout)
+    calls = []
+
+    class Counting:
+        def __init__(self):
+            self.layout, self.name = inner.layout, inner.name
+
+        def scores(self, points, mask):
+            calls.append(points.shape)
+            return inner.scores(points, mask)
+
+    labeler = RememberingLabeler(Counting())
+    first = label_take(take, layout, labeler=labeler, hands=2)
+    assert len(calls) == 2
+    again = label_take(take, layout, labeler=labeler, hands=2, sides=first.info["hands"]["by_hand_order"])
+    assert len(calls) == 2 and again.names == first.names
+    np.testing.assert_array_equal(again.per_sample(), first.per_sample())
+
+
+def test_labeling_again_keeps_two_hands_and_their_sides_unless_told():
+    from mocap_autolabel.core.hands import HandNaming, relabel_plan
+
+    layout = load_layout("han19")
+    two = {"hands": {"count": 2, "sides": ["left", "right"], "by_hand_order": ["right", "left"],
+                     "naming": "{Side}Hand:{name}"}}
+    one = {"hands": {"count": 1}}
+    options, names, changed = relabel_plan(two, layout)
+    assert options == {"hands": 2, "sides": ["right", "left"], "naming": HandNaming("{Side}Hand:{name}")}
+    assert names[0] == "LeftHand:ThumbCMC" and names[19] == "RightHand:ThumbCMC" and not changed
+    assert relabel_plan(two, layout, "2")[0] == options
+    assert relabel_plan(two, layout, "1") == ({"hands": 1}, layout.names, True)
+    assert relabel_plan(one, layout) == ({}, layout.names, False)  # found again, as the first time
+    assert relabel_plan(one, layout, "2")[1][0] == "L_ThumbCMC" and relabel_plan(one, layout, "2")[2]
+    assert relabel_plan(None, layout, "2") == ({"hands": 2}, relabel_plan(one, layout, "2")[1], False)

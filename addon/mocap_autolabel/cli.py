@@ -167,7 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write a review scene: the raw take, labeled and unlabeled markers keyed by confidence "
                           "(open it in Blender with the add-on: Mocap tab > Review); needs Blender or bpy")
     lab.add_argument("--solve-hand", action="store_true",
-                     help="also fit the hand to the labels and put the keyed rig in --blend")
+                     help="also fit the hand to the labels and put the keyed rig in --blend (one rig per hand, "
+                          "Hand_L and Hand_R, for a take of two hands)")
     _progress_flags(lab)
 
     sol = sub.add_parser("solve", help="fit the rigged hand to a labeled take: calibration, IK, Blender/FBX/BVH")
@@ -481,14 +482,16 @@ def _label(args) -> int:
             bar(f"writing {args.output}")
             write_c3d(labeled_take(take, labeling), args.output)
         solved = None
-        if args.blend and labeling.info["hands"]["count"] == 2:
-            raise ValueError("a review scene (--blend) holds one hand for now; the take holds two: label it "
-                             "with --hands 1, or write the labeled C3D (-o) and solve it (solve --blend)")
         if args.solve_hand:
-            from .core.pipeline import solve_take
+            from .core.hands import HandNaming
+            from .core.pipeline import solve_hands
 
-            bar.stage("solving the hand")
-            solved = solve_take(labeled_take(take, labeling), layout, **_solve_progress(bar))
+            bar.stage("solving the hand" if labeling.info["hands"]["count"] == 1 else "solving both hands")
+            naming = labeling.info["hands"].get("naming")
+            # One HandSolve for a plain one-hand take, else [(side, HandSolve)]: one rig per hand.
+            solved = solve_hands(labeled_take(take, labeling), layout, HandNaming(naming) if naming else None,
+                                 **_solve_progress(bar))
+            solved = solved[0][1] if [side for side, _ in solved] == [""] else solved
         if args.blend:
             from .blender.export import write_review_scene
 
@@ -537,7 +540,11 @@ def _label(args) -> int:
     if args.output:
         print(f"  labeled  {args.output}")
     if args.blend:
-        hand = f" and the solved hand (marker RMS {solved.fit.overall_rms() * 1000:.2f} mm)" if solved else ""
+        if isinstance(solved, list):
+            hand = " and the solved hands (marker RMS " + ", ".join(
+                f"{side} {one.fit.overall_rms() * 1000:.2f} mm" for side, one in solved) + ")"
+        else:
+            hand = f" and the solved hand (marker RMS {solved.fit.overall_rms() * 1000:.2f} mm)" if solved else ""
         print(f"  review   {args.blend}: labeled markers coloured by confidence{hand}")
     try:
         if args.report:

@@ -159,11 +159,14 @@ def key_poses(arm_obj: bpy.types.Object, hand: HandModel, poses: np.ndarray, fir
                 animio.write_keys(fc, frames, bases[:, b, i, 3])
 
 
-def solved_hand_collection(scene: bpy.types.Scene, source: str, name: str) -> bpy.types.Collection:
+def solved_hand_collection(scene: bpy.types.Scene, source: str, name: str,
+                           replaces: tuple | list = ()) -> bpy.types.Collection:
     """A new collection ``name`` in ``scene`` for the hand solved from ``source`` (a take's collection
-    name, or a file). An earlier solve of the same source goes first, with its objects, their data
+    name, or a file; ``<take>:left`` / ``<take>:right`` for the hands of a two-hand take). An earlier
+    solve of the same source (or of one in ``replaces``) goes first, with its objects, their data
     and actions: solving again replaces the hand instead of adding a second one."""
-    for old in [c for c in bpy.data.collections if c.get("mocap_solved_from") == source]:
+    gone = {source, *replaces}
+    for old in [c for c in bpy.data.collections if c.get("mocap_solved_from") in gone]:
         objs = list(old.all_objects)
         owned = {o.data for o in objs if o.data is not None}
         owned |= {o.animation_data.action for o in objs if o.animation_data and o.animation_data.action}

@@ -115,7 +115,10 @@ def write_solved_scene(take, solved, blend: str | None = None, fbx: str | None =
 def write_review_scene(take, layout_ref: str, labeling, blend: str, method: str = "set", temporal: str = "vote",
                        solved=None) -> str:
     """A fresh scene for review: the raw take, its labeled and unlabeled markers keyed by confidence,
-    the review state (so the add-on's panel picks it up), and the solved hand if given; saved to ``blend``."""
+    the review state (so the add-on's panel picks it up), and the solved hand if given; saved to ``blend``.
+
+    ``solved`` is one HandSolve, or ``[(side, HandSolve), ...]`` for a take of two hands (rigs
+    ``Hand_L`` / ``Hand_R``, which the panel's Solve Hand replaces when it solves the take again)."""
     from ..core.layout import load_layout
     from ..core.review import Review
     from .armature import build_solved_hand, solved_hand_collection
@@ -127,7 +130,12 @@ def write_review_scene(take, layout_ref: str, labeling, blend: str, method: str 
     coll = build_take(take, scene, ImportOptions())
     write_labeling(coll, take, load_layout(layout_ref), labeling)
     commit(scene, coll, ReviewState(labeling, Review(), layout_ref, method, temporal))
-    if solved is not None:
-        build_solved_hand(solved, solved_hand_collection(scene, coll.name, "Hand"))
+    hands = [] if solved is None else solved if isinstance(solved, list) else [("", solved)]
+    for side, one in hands:
+        if side:  # sources as Solve Hand names them, so that solving the take again replaces these rigs
+            build_solved_hand(one, solved_hand_collection(scene, f"{coll.name}:{side}", f"{coll.name} {side} hand"),
+                              name=f"Hand_{side[0].upper()}")
+        else:
+            build_solved_hand(one, solved_hand_collection(scene, coll.name, "Hand"))
     save_blend(blend)
     return blend

@@ -30,6 +30,13 @@ TEMPORAL_ITEMS = [("vote", "Trajectory voting", "Decide per tracklet (default)")
                   ("viterbi", "N-best Viterbi", "Alexanderson's N-best hypotheses with a Kalman filter"),
                   ("none", "None", "Per-frame labels as they come")]
 
+#: The command line's --hands. "auto" finds them; a take labeled with two hands before stays two
+#: (its corrections name a hand's labels).
+HANDS_ITEMS = [("auto", "Find Them", "Find how many hands the take holds (a take labeled with two hands "
+                                     "before keeps both, with their sides)"),
+               ("1", "One", "Label one hand, whatever the take holds"),
+               ("2", "Two", "Label two hands (left and right), named L_ / R_")]
+
 
 def _layouts(_self, _context):
     return [(name, name, f"Built-in layout {name}") for name in builtin_layouts()]
@@ -115,6 +122,8 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
                                 description="A layout .toml instead of a built-in layout")
     method: EnumProperty(name="Method", items=_methods, description="Per-frame labeler (set: ours, the default)")
     temporal: EnumProperty(name="Temporal", default="vote", items=TEMPORAL_ITEMS)
+    hands: EnumProperty(name="Hands", default="auto", items=HANDS_ITEMS,
+                        description="How many hands of the layout the take holds")
     sure: FloatProperty(name="Confident at", default=SURE, min=0.5, max=1.0, subtype="FACTOR", update=_sure_changed,
                         description="Segments at or above this confidence need no review")
     auto_resolve: BoolProperty(name="Re-solve After Each Edit", default=False,

@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, field
 import bpy
 import numpy as np
 
+from ..core.hands import labeling_sides, relabel_plan
 from ..core.labeling import EMPTY, Labeling, unlabeled_point_names
 from ..core.layout import Layout, load_layout
 from ..core.review import (
@@ -191,7 +192,34 @@ def state_layout(state: ReviewState) -> Layout:
 # --- writing labels into the scene ----------------------------------------------------------
 
 def _labeled_objects(coll: bpy.types.Collection) -> dict[int, bpy.types.Object]:
-    return {int(o["mocap_label"]): o for o in coll.objects if "mocap_label" in o}
+    # all_objects: a two-hand take's labeled empties sit in one child collection per hand
+    return {int(o["mocap_label"]): o for o in coll.all_objects if "mocap_label" in o}
+
+
+#: The child collection of "Labeled" that holds each hand's empties in a two-hand take.
+HAND_COLLECTIONS = {"left": "Left hand", "right": "Right hand"}
+
+
+def _hand_collections(take_coll: bpy.types.Collection, labeled: bpy.types.Collection,
+                      sides: list[str]) -> list[bpy.types.Collection]:
+    """The collection each hand's labeled empties go in: "Labeled" itself for one hand; for two, a
+    "Left hand" and a "Right hand" child of it (one Labeled collection per hand, which the Outliner
+    shows and hides as a whole, under the one "Labeled" that the panel, export and a later take's
+    names keep finding)."""
+    if len(sides) < 2:
+        return [labeled]
+    out = []
+    for side in sides:
+        key = f"mocap_labeled_{side}"
+        coll = take_coll.get(key)
+        if coll is None or coll.name not in bpy.data.collections:
+            coll = bpy.data.collections.new(free_name(HAND_COLLECTIONS[side], bpy.data.collections, take_coll.name))
+            labeled.children.link(coll)
+            coll["mocap_take"] = take_coll  # take_collection() finds the take from a hand's empty
+            coll["mocap_side"] = side
+            take_coll[key] = coll
+        out.append(coll)
+    return out
 
 
 def _null_objects(coll: bpy.types.Collection) -> dict[int, bpy.types.Object]:
@@ -265,6 +293,8 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
     per = labeling.per_sample()
     classes = marker_classes(labeling, sure)
     m = len(layout)
+    n_labels = len(labeling.names)  # M, or 2M for two hands (the left hand's first)
+    hand_colls = _hand_collections(take_coll, labeled, labeling_sides(labeling.info))
     if previous is not None and (previous.names != labeling.names or previous.per_sample().shape != per.shape):
         previous = None
     if previous_sure is None:
@@ -273,15 +303,16 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
 
     # Labeled markers: (F, M, 3) positions in layout order.
     f, s = np.nonzero(per >= 0)
-    xyz = np.full((take.n_frames, m, 3), np.nan, dtype=np.float32)
+    xyz = np.full((take.n_frames, n_labels, 3), np.nan, dtype=np.float32)
     xyz[f, per[f, s]] = take.positions[f, s] * scale
-    todo = range(m) if previous is None else changed_labels(previous, labeling, previous_sure, sure).tolist()
+    todo = range(n_labels) if previous is None else changed_labels(previous, labeling, previous_sure, sure).tolist()
     objs = _labeled_objects(labeled)
     for label in todo:
         obj = objs.get(label)
-        finger = finger_of(layout, label)
+        finger = finger_of(layout, label % m)  # label % M: the layout marker, on either hand
         if obj is None:
-            obj = new_marker(free_name(layout.names[label], bpy.data.objects, take_coll.name), labeled, scale)
+            obj = new_marker(free_name(labeling.names[label], bpy.data.objects, take_coll.name),
+                             hand_colls[min(label // m, len(hand_colls) - 1)], scale)
             obj["mocap_label"] = label
             obj.color = (*theme_color(finger), 1.0)
         valid = classes[:, label] >= 0
@@ -394,9 +425,15 @@ def summary(labeling: Labeling, sure: float) -> dict:
     s = labeling.summary(sure)
     doubt = labeling.info.get("layout_doubt")
     present = np.unique(labeling.label[labeling.label >= 0])
+    facts = labeling.info.get("hands", {})
+    hands = None
+    if facts.get("count", 1) == 2:
+        sure_of = f", sides {100 * facts['confidence']:.0f} % sure" if "confidence" in facts else ""
+        hands = f"2 hands: left and right{sure_of}"
     return {"labels": f"{len(present)} / {len(labeling.names)}", "confident": s["confident_share"] * 100,
             "uncertain": len(uncertain_segments(labeling, sure)),
-            "locked": int(labeling.locked.sum()), "layout_doubt": doubt and LayoutDoubt(**doubt)}
+            "locked": int(labeling.locked.sum()), "layout_doubt": doubt and LayoutDoubt(**doubt),
+            "hands": hands, "hands_warning": facts.get("warning")}
 
 
 def legend() -> list[tuple[str, str]]:
@@ -408,10 +445,12 @@ def legend() -> list[tuple[str, str]]:
 
 def overlay_geometry(take_coll: bpy.types.Collection, layout: Layout, classes: np.ndarray, index: int,
                      sticks: bool = True) -> dict[str, np.ndarray]:
-    """Points, colours and stick segments for the layout's markers at sample ``index``.
+    """Points, colours and stick segments for the labeled markers at sample ``index``: the layout's
+    M, or both hands' 2M (each coloured by its finger, sticks along each digit of each hand, never
+    from one hand to the other).
 
     Args:
-        classes: int8 ``(F, M)`` marker classes (:func:`core.review.marker_classes`).
+        classes: int8 ``(F, L)`` classes of the L labels (:func:`core.review.marker_classes`).
 
     Returns:
         ``points`` ``(n, 3)`` world positions, ``colors`` ``(n, 4)`` finger colours, ``uncertain``
@@ -419,27 +458,33 @@ def overlay_geometry(take_coll: bpy.types.Collection, layout: Layout, classes: n
     """
     coll = take_coll.get("mocap_labeled")
     objs = _labeled_objects(coll) if coll is not None else {}
+    m = len(layout)
+    n_labels = classes.shape[1] if classes.ndim == 2 else m
     ok = 0 <= index < classes.shape[0]
-    pos = np.full((len(layout), 3), np.nan, dtype=np.float32)
-    cls = np.full(len(layout), -1, dtype=np.int8)
+    pos = np.full((n_labels, 3), np.nan, dtype=np.float32)
+    cls = np.full(n_labels, -1, dtype=np.int8)
     for label, obj in objs.items():
-        if ok and label < len(layout) and classes[index, label] >= 0:
+        if ok and label < n_labels and classes[index, label] >= 0:
             pos[label] = obj.matrix_world.translation
             cls[label] = classes[index, label]
     shown = np.flatnonzero(cls >= 0)
-    fingers = [finger_of(layout, i) for i in range(len(layout))]
+    fingers = [finger_of(layout, i % m) for i in range(n_labels)]
     colors = np.array([(*theme_color(fingers[i]), 1.0) for i in shown], dtype=np.float32).reshape(-1, 4)
     ring = {1: (0.3, 0.8, 1.0, 1.0), 2: (1.0, 0.25, 0.45, 1.0)}  # the Dope Sheet's breakdown / extreme hues
     unsure = shown[(cls[shown] == 1) | (cls[shown] == 2)]
     lines = []
     if sticks:
-        for finger in FINGERS[:-1]:
-            chain = [i for i in range(len(layout)) if fingers[i] == finger and cls[i] >= 0]
-            chain.sort(key=lambda i: (layout.markers[i].bone.endswith(("prox", "mid", "dist")),
-                                      ("meta", "prox", "mid", "dist").index(layout.markers[i].bone.split("_")[1]),
-                                      layout.markers[i].along))
-            for a, b in zip(chain[:-1], chain[1:]):
-                lines += [pos[a], pos[b]]
+        def along(i: int) -> tuple:
+            marker = layout.markers[i % m]
+            return (marker.bone.endswith(("prox", "mid", "dist")),
+                    ("meta", "prox", "mid", "dist").index(marker.bone.split("_")[1]), marker.along)
+
+        for hand in range(0, n_labels, m):  # each hand's digits on their own
+            for finger in FINGERS[:-1]:
+                digit = [i for i in range(hand, min(hand + m, n_labels)) if fingers[i] == finger and cls[i] >= 0]
+                chain = sorted(digit, key=along)
+                for a, b in zip(chain[:-1], chain[1:]):
+                    lines += [pos[a], pos[b]]
     return {"points": pos[shown], "colors": colors, "uncertain": pos[unsure],
             "ring_colors": np.array([ring[int(c)] for c in cls[unsure]], dtype=np.float32).reshape(-1, 4),
             "lines": np.array(lines, dtype=np.float32).reshape(-1, 3)}
@@ -482,6 +527,10 @@ class LabelRequest:
     #: corrections of an earlier labeling with another layout that name a label this layout lacks
     dropped: list = field(default_factory=list)
     dropped_names: list = field(default_factory=list)  # the label names the dropped corrections use
+    #: label_take's hand keywords (:func:`core.hands.relabel_options`): a take labeled with two
+    #: hands before keeps both and their sides, so its corrections keep their hands
+    hand_options: dict = field(default_factory=dict)
+    hands_changed: bool = False  # labeled before with another count of hands
     #: the share of the run done (0-1), written by :meth:`run` as its stages start
     done: float = 0.0
     stage: str = ""
@@ -509,10 +558,10 @@ class LabelRequest:
 
         labeling = label_take(self.take, self.layout, method=self.method, temporal=self.temporal,
                               constraints=self.review.constraints, splits=self.review.splits,
-                              labeler=self.labeler, progress=staged)
-        if check_layout:
-            staged("checking the layout against the other built-in layouts")
+                              labeler=self.labeler, progress=staged, **self.hand_options)
+        if check_layout:  # as the command line does: the layout on one hand, the no-hand rule per hand
             one = labeling.info.get("hands", {}).get("count", 1) == 1
+            staged("checking the layout against the other built-in layouts" if one else "checking both hands")
             doubt = layout_doubt(self.take, self.layout, labeling) if one else None
             checks = hand_checks(self.take, self.layout, labeling, doubt)
             if not any(check.found for _, check in checks):
@@ -527,12 +576,15 @@ class LabelRequest:
 
 
 def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None, method: str | None = None,
-                  temporal: str | None = None) -> LabelRequest:
+                  temporal: str | None = None, hands: str = "auto") -> LabelRequest:
     """A labeling run for the take; settings default to those it was labeled with before.
 
     A take labeled before keeps its corrections when it is labeled again: with another layout,
     those naming a marker the new layout also has (by name), ghost decisions and splits are kept,
-    and the others are listed in the request's ``dropped`` for the caller to report.
+    and the others are listed in the request's ``dropped`` for the caller to report. A take labeled
+    with two hands keeps them and their sides (``hands="auto"``); ``hands`` ``"1"`` or ``"2"``
+    forces the count, and where that changes it, the corrections naming labels are dropped (a
+    hand's labels mean nothing to the other count) and reported the same way.
     """
     from ..core.labelers import make_labeler
     from .session import labeler
@@ -542,18 +594,21 @@ def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None
     method = method or (state.method if state else "set")
     temporal = temporal or (state.temporal if state else "vote")
     layout = load_layout(layout_ref)
-    keep = state is not None and (state.layout == layout_ref or state.labeling.names == layout.names)
+    # A two-hand take stays two hands with its sides; names are those the new labeling will have.
+    hand_options, names, hands_changed = relabel_plan(state.labeling.info if state else None, layout, hands)
+    keep = state is not None and (state.layout == layout_ref and not hands_changed or state.labeling.names == names)
     review = state.review if keep else Review()
     previous = state.labeling if keep else None
     dropped = []
     if state is not None and not keep:
-        review, dropped = remap_review(state.review, state.labeling.names, layout.names)
+        review, dropped = remap_review(state.review, state.labeling.names, names)
     take = current_take(take_coll)
     lab = None
     if method in ("set", "perm", "cnn"):
         lab = labeler(take_coll, method, layout, lambda: make_labeler(method, layout))
     return LabelRequest(take_coll.name, take, layout, layout_ref, method, temporal, review, previous, lab,
-                        state.token if state else "", dropped, list(state.labeling.names) if state else [])
+                        state.token if state else "", dropped, list(state.labeling.names) if state else [],
+                        hand_options, hands_changed)
 
 
 def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, request: LabelRequest,
@@ -567,8 +622,8 @@ def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, reques
     if now != request.token:
         raise ValueError(f"{take_coll.name}: the labels changed while the labeling ran; label again")
 
-    if request.previous is None and has_review(take_coll):
-        _clear_labels(take_coll)  # labeled before with another layout
+    if has_review(take_coll) and (request.previous is None or request.previous.names != labeling.names):
+        _clear_labels(take_coll)  # labeled before with another layout (or another count of hands)
     counts = write_labeling(take_coll, request.take, request.layout, labeling, request.previous,
                             scene_sure(scene))
     commit(scene, take_coll, ReviewState(labeling, request.review, request.layout_ref, request.method,
@@ -603,8 +658,13 @@ def _clear_labels(take_coll: bpy.types.Collection) -> None:
         coll = take_coll.get(key)
         if coll is None:
             continue
-        for obj in list(coll.objects):
+        for obj in list(coll.all_objects):
             action = obj.animation_data.action if obj.animation_data else None
             bpy.data.objects.remove(obj)
             if action is not None and action.users == 0:
                 bpy.data.actions.remove(action)
+    for side in HAND_COLLECTIONS:  # a two-hand labeling's hand collections (made again where needed)
+        coll = take_coll.get(f"mocap_labeled_{side}")
+        if coll is not None and coll.name in bpy.data.collections:
+            bpy.data.collections.remove(coll)
+        take_coll.pop(f"mocap_labeled_{side}", None)

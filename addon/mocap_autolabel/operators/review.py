@@ -15,7 +15,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from ..blender.properties import LAYOUT_DEFAULT, TEMPORAL_ITEMS, _layouts, _methods
+from ..blender.properties import HANDS_ITEMS, LAYOUT_DEFAULT, TEMPORAL_ITEMS, _layouts, _methods
 
 
 def _is_take(coll) -> bool:
@@ -207,13 +207,15 @@ class MOCAPAL_OT_label(bpy.types.Operator):
                                 description="A layout .toml instead of a built-in layout")
     method: EnumProperty(name="Method", items=_methods, description="Per-frame labeler")
     temporal: EnumProperty(name="Temporal", items=TEMPORAL_ITEMS)
+    hands: EnumProperty(name="Hands", items=HANDS_ITEMS, default="auto",
+                        description="How many hands of the layout the take holds")
     use_as_panel_layout: BoolProperty(name="Keep as the Panel's Layout", default=False, options={"SKIP_SAVE"},
                                       description="Also put this layout in the panel's Layout field (the "
                                                   "Review panel's 'Label as' button does)")
 
     #: The settings the operator shares with the panel: given to the operator (from Python, a
     #: button, or the redo panel), they win; not given, the panel's are used.
-    SETTINGS = ("layout", "layout_file", "method", "temporal")
+    SETTINGS = ("layout", "layout_file", "method", "temporal", "hands")
 
     @classmethod
     def poll(cls, context):
@@ -234,7 +236,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
 
         src = self._settings(context)
         layout = bpy.path.abspath(src["layout_file"]) if src["layout_file"] else src["layout"]
-        return prepare_label(panel_take(context), layout, src["method"], src["temporal"])
+        return prepare_label(panel_take(context), layout, src["method"], src["temporal"], src["hands"])
 
     def _fail(self, exc: Exception, coll_name: str) -> set[str]:
         from ..core.errors import MocapInputError
@@ -268,7 +270,10 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         self.report({"INFO"}, f"Labeled {request.take_name} with {request.layout.name}: "
                               f"{s['labels']} labels, {s['confident']:.1f} % of labeled samples confident, "
                               f"{plural(s['uncertain'], 'uncertain segment')}"
+                              + (f"; {s['hands']}" if s["hands"] else "")
                               + (f"; {plural(kept, 'correction')} kept" if kept else ""))
+        if s["hands_warning"]:
+            self.report({"WARNING"}, f"{request.take_name}: {s['hands_warning']}")
         if s["layout_doubt"]:
             self.report({"WARNING"}, f"{request.take_name}: {s['layout_doubt']}")
         from ..core.pipeline import time_limit_warning
@@ -287,8 +292,12 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         old = request.dropped_names
         said = "; ".join(describe(c, old, names, first) for c in request.dropped)
         n = len(request.dropped)
+        lacks = f"{request.layout.name} lacks"
+        if request.hands_changed:
+            hands = "two hands" if request.hand_options.get("hands") == 2 else "one hand"
+            lacks = f"{request.layout.name} with {hands} lacks"
         return (f"{request.take_name}: {n} {'correction names a marker' if n == 1 else 'corrections name markers'} "
-                f"that {request.layout.name} lacks, and {'is' if n == 1 else 'are'} dropped ({said}); "
+                f"that {lacks}, and {'is' if n == 1 else 'are'} dropped ({said}); "
                 f"undo (Ctrl+Z) brings {'it' if n == 1 else 'them'} back")
 
     def execute(self, context):

@@ -14,6 +14,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
 
 from ..blender.properties import LAYOUT_DEFAULT, _layouts
+from ..core.hands import SIDES
 from .review import context_take, reviewed_take
 
 
@@ -32,19 +33,37 @@ class SolveRequest:
     calibration: object = None
     smooth_hz: float = 10.0
     share: float = 0.0  # of the work done, set as the solve goes
+    naming: object = None  # the take's HandNaming (None: any built-in convention)
 
     def run(self, say=None):
-        """The :class:`~mocap_autolabel.core.pipeline.HandSolve`; ``say(message)`` gets each stage
-        (and may raise to stop, as a cancelled Job's does)."""
+        """The :class:`~mocap_autolabel.core.pipeline.HandSolve` of a take labeled with plain names (one
+        hand); for a take whose labels carry their side (two hands, ``L_ThumbTip`` ...), ``[(side,
+        HandSolve)]``, each hand calibrated on its own (a given calibration serves the hand of its
+        side). ``say(message)`` gets each stage (and may raise to stop, as a cancelled Job's does)."""
+        from ..core.errors import MocapInputError
+        from ..core.hands import split_hands
         from ..core.pipeline import solve_take
 
-        def progress(message: str, share: float) -> None:
-            self.share = share
-            if say is not None:
-                say(message)
+        hands = split_hands(self.take, self.layout, self.naming)
+        out = []
+        for i, (side, one) in enumerate(hands):
+            def progress(message: str, share: float, i=i, side=side) -> None:
+                self.share = (i + share) / len(hands)  # each hand is about the same work
+                if say is not None:
+                    say(f"{side} hand: {message}" if side else message)
 
-        return solve_take(self.take, self.layout, calibration=self.calibration, smooth_hz=self.smooth_hz,
-                          progress=progress)
+            cal = self.calibration
+            if cal is not None and side and cal.side != side:
+                cal = None  # a calibration of the other hand: this one is calibrated on the take
+            try:
+                solved = solve_take(one, self.layout, calibration=cal, smooth_hz=self.smooth_hz,
+                                    side=side or None, progress=progress)
+            except MocapInputError as exc:
+                if not side:
+                    raise
+                raise MocapInputError(self.source, f"{side} hand: {exc.problem}") from exc
+            out.append((side, solved))
+        return out[0][1] if [side for side, _ in out] == [""] else out
 
 
 def _stage_printer():
@@ -120,7 +139,18 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
             return None
         take, layout, source, scale = found
         calibration = Calibration.load(bpy.path.abspath(self.calibration)) if self.calibration else None
-        return SolveRequest(take, layout, source, scale, calibration, self.smooth_hz)
+        return SolveRequest(take, layout, source, scale, calibration, self.smooth_hz, naming=self._naming(context))
+
+    def _naming(self, context):
+        """The side naming of the reviewed take's labels (a custom pattern included), else None."""
+        from ..blender.review import load_state
+        from ..core.hands import HandNaming
+
+        coll = None if self.filepath else reviewed_take(context)
+        if coll is None:
+            return None
+        pattern = load_state(coll).labeling.info.get("hands", {}).get("naming")
+        return HandNaming(pattern) if pattern else None
 
     def _fail(self, exc: BaseException, source: str) -> set[str]:
         from ..core.errors import MocapInputError
@@ -135,22 +165,33 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         """Build the rig (replacing an earlier solve of the same take) and report."""
         from ..blender.armature import build_solved_hand, solved_hand_collection
         from ..blender.scene import free_name
+        from ..core.hands import sided_path
 
+        hands = solved if isinstance(solved, list) else [("", solved)]
         try:
             if self.save_calibration:
-                solved.calibration.save(bpy.path.abspath(self.save_calibration))
+                for side, one in hands:  # c.json, or c_left.json and c_right.json (as the command line)
+                    one.calibration.save(sided_path(bpy.path.abspath(self.save_calibration), side))
         except Exception as exc:
             return self._fail(exc, self.save_calibration)
         base = os.path.splitext(os.path.basename(request.source))[0]
-        collection = solved_hand_collection(context.scene, request.source, f"{base} hand")
-        # "Hand" for the first take's rig, "<take>:Hand" beside another take's (never "Hand.001").
-        name = free_name("Hand", bpy.data.objects, base)
-        arm = build_solved_hand(solved, collection, name=name, scale=request.scale)
-        report = solved.report()
-        seconds = sum(solved.seconds.values())
-        self.report({"INFO"}, f"Solved {report['solved_frames']} of {report['frames']} frames in {seconds:.1f} s: "
-                              f"marker RMS {report['marker_rms_mm']:.2f} mm, {report['frames_over_gate']} frames "
-                              f"over the {report['gate_mm']:g} mm gate ({arm.name})")
+        # Every earlier solve of the take goes, one-hand or two-hand: solving again replaces.
+        earlier = [request.source] + [f"{request.source}:{side}" for side in SIDES]
+        said = []
+        for i, (side, one) in enumerate(hands):
+            collection = solved_hand_collection(context.scene, f"{request.source}:{side}" if side else request.source,
+                                                f"{base} {side} hand" if side else f"{base} hand",
+                                                replaces=earlier if i == 0 else ())
+            # "Hand" for the first take's rig, "<take>:Hand" beside another take's (never "Hand.001");
+            # "Hand_L" / "Hand_R" for the hands of a two-hand take, as the command line names them.
+            name = free_name(f"Hand_{side[0].upper()}" if side else "Hand", bpy.data.objects, base)
+            arm = build_solved_hand(one, collection, name=name, scale=request.scale)
+            report = one.report()
+            seconds = sum(one.seconds.values())
+            said.append(f"{report['solved_frames']} of {report['frames']} frames in {seconds:.1f} s: marker RMS "
+                        f"{report['marker_rms_mm']:.2f} mm, {report['frames_over_gate']} frames over the "
+                        f"{report['gate_mm']:g} mm gate ({arm.name})")
+        self.report({"INFO"}, "Solved " + "; ".join(said))
         return {"FINISHED"}
 
     def invoke(self, context, event):

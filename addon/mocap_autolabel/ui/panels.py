@@ -51,6 +51,7 @@ class MOCAPAL_PT_label(_Sidebar, bpy.types.Panel):
         col.prop(settings, "layout_file")
         col.prop(settings, "method")
         col.prop(settings, "temporal")
+        col.prop(settings, "hands")
         col.operator("mocap_autolabel.label", icon="SORTALPHA")
         col.operator("mocap_autolabel.solve_hand", icon="VIEW_PAN")
 
@@ -70,6 +71,10 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         s = summary(state.labeling, settings.sure)
         box = layout.box()
         box.label(text=f"{settings.take.name}: {state.layout}, {state.method}, {state.temporal}")
+        if s["hands"]:
+            box.label(text=s["hands"])
+        if s["hands_warning"]:
+            box.label(text=s["hands_warning"], icon="ERROR")
         box.label(text=f"Labels present: {s['labels']}")
         box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
         box.label(text=f"Uncertain segments: {s['uncertain']}   Locked: {s['locked']}")

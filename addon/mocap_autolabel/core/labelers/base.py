@@ -131,15 +131,23 @@ class Labeler(ABC):
 
 class RememberingLabeler(Labeler):
     """Another labeler whose last scores are kept: a re-solve of the same take (after a user's
-    correction) then skips the per-frame network entirely, which is most of the time."""
+    correction) then skips the per-frame network entirely, which is most of the time.
 
-    def __init__(self, inner: Labeler) -> None:
+    The last ``keep`` inputs are remembered: a take of two hands scores each hand's points on
+    their own, one after the other, and would otherwise never find the scores it asks for.
+    """
+
+    def __init__(self, inner: Labeler, keep: int = 2) -> None:
         self.inner, self.layout, self.name = inner, inner.layout, inner.name
-        self._key: tuple | None = None
-        self._scores: np.ndarray | None = None
+        self.keep = keep
+        self._remembered: list[tuple[tuple, np.ndarray]] = []  # (key, scores), the latest last
 
     def scores(self, points: np.ndarray, mask: np.ndarray) -> np.ndarray:
         key = (points.shape, hash(points.tobytes()), hash(mask.tobytes()))
-        if key != self._key:
-            self._scores, self._key = self.inner.scores(points, mask), key
-        return self._scores.copy()
+        for i, (known, scores) in enumerate(self._remembered):
+            if known == key:
+                self._remembered.append(self._remembered.pop(i))
+                return scores.copy()
+        scores = self.inner.scores(points, mask)
+        self._remembered = (self._remembered + [(key, scores)])[-self.keep:]
+        return scores.copy()
