@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mocap_autolabel.core.formats.c3d import write_c3d
-from mocap_autolabel.core.labeling import EMPTY, NULL
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.review import KEY_TYPES, marker_classes, uncertain_segments
 from mocap_autolabel.core.synth.generate import synthesize
@@ -110,17 +109,12 @@ def test_label_acts_on_the_panels_take_and_never_drops_corrections_silently(labe
 
     assert take_collection(active_after_import) == glove  # the import made the new take the active one
 
-    # Relabeling the han19 take with glove13 keeps the ghost decision (valid in any layout) and
-    # says that the ThumbTip lock cannot follow: glove13 has no ThumbTip.
+    # Relabeling the han19 take with glove13 finds no hand (the CLI's and batch's rule): refused,
+    # and the take keeps its labels and both corrections.
     settings.take = syn
-    capfd.readouterr()
-    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
-    out = capfd.readouterr().out
-    unlabel = before.review.constraints[1]
-    assert state(syn).layout == "glove13" and state(syn).review.constraints == [unlabel]
-    assert "dropped" in out and "ThumbTip on" in out and "1 correction kept" in out
-    per = state(syn).labeling.per_sample()[unlabel.start:unlabel.stop, unlabel.slot]
-    assert (per[per != EMPTY] == NULL).all()
+    with pytest.raises(RuntimeError, match="no hand found"):
+        bpy.ops.mocap_autolabel.label()
+    assert state(syn).layout == "han19" and state(syn).review.constraints == before.review.constraints
 
 
 def test_the_issue_scenario_on_the_real_glove_recording(empty_scene, bpy_module, tmp_path):
@@ -298,21 +292,31 @@ def test_the_take_field_holds_only_imported_takes(labeled):
 def test_the_label_operators_own_properties_win_over_the_panels(labeled):
     bpy, coll = labeled
     settings = bpy.context.scene.mocap_autolabel
-    assert settings.layout == "han19"
-    assert bpy.ops.mocap_autolabel.label(layout="glove13") == {"FINISHED"}
-    assert state(coll).layout == "glove13"
+    assert settings.temporal == "vote"
     assert bpy.ops.mocap_autolabel.label(temporal="none") == {"FINISHED"}
-    st = state(coll)
-    assert (st.layout, st.temporal) == ("han19", "none")  # not given: the panel's layout
-    # One click on the Review panel's "is this a glove13 take?" box runs Label with the suggested layout.
-    settings.layout = "glove13"
+    assert state(coll).temporal == "none"
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    assert state(coll).temporal == "vote"  # not given: the panel's
+    # A layout given to the operator wins too: glove13 finds no hand on this han19 take, and says
+    # so in the operator's own terms, where the panel's han19 labels it.
+    with pytest.raises(RuntimeError, match="no hand found.*glove13"):
+        bpy.ops.mocap_autolabel.label(layout="glove13")
+    assert state(coll).layout == "han19"
+
+
+def test_one_click_relabels_with_the_layout_the_review_panel_suggests(empty_scene, bpy_module, tmp_path):
+    from conftest import data_path
+
+    bpy = bpy_module
+    coll = _import(bpy, data_path("hands", "qualisys_glove13", "recording_part1.tsv"), tmp_path)
+    settings = bpy.context.scene.mocap_autolabel
+    assert bpy.ops.mocap_autolabel.label(layout="han19") == {"FINISHED"}
     doubt = state(coll).labeling.info["layout_doubt"]
-    assert doubt["better"] == "han19"
+    assert doubt["better"] == "glove13"
     # (the button: ui/panels.py, MOCAPAL_PT_review)
     assert bpy.ops.mocap_autolabel.label(layout=doubt["better"], use_as_panel_layout=True) == {"FINISHED"}
-    assert state(coll).layout == "han19" and "layout_doubt" not in state(coll).labeling.info
-    assert settings.layout == "han19"  # the panel now says what the take is labeled with
+    assert state(coll).layout == "glove13" and "layout_doubt" not in state(coll).labeling.info
+    assert settings.layout == "glove13"  # the panel now says what the take is labeled with
 
 
 # --- the missing pieces: shortcuts, selection after Assign, messages, progress ------------------

@@ -179,15 +179,14 @@ def test_relabel_tools_work_across_both_hands_and_re_solve_keeps_them(labeled, c
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     assert _state(coll).labeling.per_sample()[index, slot] == l_tip
     assert [c.name for c in coll["mocap_labeled"].children] == ["Left hand", "Right hand"]
-    # Hands: One labels one hand: plain names, no hand collections, and the corrections naming a
-    # hand's labels are dropped with a warning (undo brings them back); Two brings both back.
-    capfd.readouterr()
-    assert bpy.ops.mocap_autolabel.label(hands="1") == {"FINISHED"}
-    assert "that han19 with one hand lacks, and are dropped" in capfd.readouterr().out
-    one = _state(coll)
-    assert one.labeling.names == load_layout("han19").names and not one.review.constraints
-    assert not coll["mocap_labeled"].children and len(coll["mocap_labeled"].objects) == M
-    assert "mocap_labeled_left" not in coll
+    # Hands: One on this take finds no hand (38 points are no one hand: the no-hand rule of the
+    # command line and batch) and changes nothing: both hands and the corrections stay.
+    before = _state(coll)
+    with pytest.raises(RuntimeError, match="no hand found"):
+        bpy.ops.mocap_autolabel.label(hands="1")
+    after = _state(coll)
+    assert after.labeling.names == lab.names and after.review.constraints == before.review.constraints
+    assert [c.name for c in coll["mocap_labeled"].children] == ["Left hand", "Right hand"]
     scene.mocap_autolabel.hands = "2"  # the panel's setting
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     assert _state(coll).labeling.names == lab.names and len(_objects(coll)) == 2 * M

@@ -206,9 +206,9 @@ def test_synth_two_hands_cli_label_and_solve(tmp_path, capsys):
     assert set(np.unique(truth["labels"][truth["labels"] >= 0]) // 19) == {0, 1}
     out = tmp_path / "two_labeled.c3d"
     capsys.readouterr()
-    # These hands never come 6 cm apart in 300 frames: one hand by default, with a warning; two
-    # when told.
-    assert main(["label", str(take)]) == 0 and "if it holds two, use --hands 2" in capsys.readouterr().out
+    # These hands never come 6 cm apart in 300 frames: one hand by default, where the no-hand rule
+    # finds none, and the error says how to label two; two when told.
+    assert main(["label", str(take)]) == 1 and "if it holds two, use --hands 2" in capsys.readouterr().err
     assert main(["label", str(take), "-o", str(out), "--hands", "2"]) == 0
     printed = capsys.readouterr().out
     assert "hands    2 hands: left" in printed and "truth" in printed

@@ -227,8 +227,9 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     doubt = None if two else layout_doubt(take, layout, labeling, settings.confident)
     checks = hand_checks(take, layout, labeling, doubt)
     if not any(check.found for _, check in checks):
-        raise MocapInputError(path, "; ".join(f"{side} hand: {check}" if side else str(check)
-                                              for side, check in checks))
+        hint = facts.get("warning")  # a take of two hands that never come apart
+        raise MocapInputError(path, "; ".join([f"{side} hand: {check}" if side else str(check)
+                                               for side, check in checks] + ([hint] if hint else [])))
     out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
            "hand_frames": round(max(check.share for _, check in checks), 4), "hands": facts["count"],
            "summary": labeling.summary(settings.confident, take.first_frame,

@@ -471,8 +471,9 @@ def _label(args) -> int:
         doubt = None if two else layout_doubt(take, layout, labeling)
         checks = hand_checks(take, layout, labeling, doubt)
         if not any(check.found for _, check in checks):  # batch's rule: labels on a body capture are no hand
-            raise MocapInputError(args.file, "; ".join(f"{side} hand: {check}" if side else str(check)
-                                                       for side, check in checks))
+            hint = labeling.info["hands"].get("warning")  # a take of two hands that never come apart
+            raise MocapInputError(args.file, "; ".join([f"{side} hand: {check}" if side else str(check)
+                                                        for side, check in checks] + ([hint] if hint else [])))
         missed = [f"{side} hand: {check}" for side, check in checks if not check.found]
         if doubt:
             labeling.info["layout_doubt"] = asdict(doubt)  # in the report, and in the review scene's panel
