@@ -88,6 +88,22 @@ def _crossings(take: Take) -> dict[int, list[int]]:
     return {slot: list(frames) for slot, frames in _CROSSINGS[key].items()}  # callers may extend theirs
 
 
+#: The hands found in the last few takes: a re-solve after a reviewer's correction asks again.
+_HANDS: dict[tuple, Hands] = {}
+
+
+def _hands(take: Take, layout: Layout, hands: str | int, ignore: np.ndarray | None) -> Hands:
+    """:func:`.hands.find_hands`, remembered for the last few takes (a copy: callers change ``both``)."""
+    key = (take.positions.shape, take.rate, hash(take.positions.tobytes()), tuple(layout.names), str(hands),
+           None if ignore is None else ignore.tobytes())
+    if key not in _HANDS:
+        while len(_HANDS) >= 4:
+            _HANDS.pop(next(iter(_HANDS)))
+        _HANDS[key] = find_hands(take, layout, hands, ignore=ignore)
+    found = _HANDS[key]
+    return replace(found, both=found.both.copy(), hand=found.hand.copy(), info=dict(found.info))
+
+
 def _labeler(method: str, layout: Layout, model, fit: np.ndarray | None, start: np.ndarray | None, take: Take,
              batch):
     if method == "gmm":
@@ -436,7 +452,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     naming = HandNaming(naming) if isinstance(naming, str) else naming
     ignore = other_named_points(take, layout, naming) if keep_named else None
     say("finding hands")
-    found = find_hands(take, layout, hands, ignore=ignore)
+    found = _hands(take, layout, hands, ignore)
     times["hands"] = time.perf_counter() - t0
     if found.count == 2 and method not in JOINT_METHODS:
         raise ValueError(f"two hands are labeled with {', '.join(JOINT_METHODS)}, not {method!r} "
@@ -602,8 +618,12 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
                 extra += partner_logp(at, samples.frame, per, n_labels, rigid, *partner)
             if with_continuity:
                 held_for = np.where(seg >= 0, (decided.stop - decided.start)[np.maximum(seg, 0)], 0)
-                extra += continuity_logp(at, samples.frame, samples.slot, per, held_for, segments, n_labels,
-                                         take.rate, *continuity)
+                # Per hand: a marker's neighbours, whose motion carries it across a gap, are its own hand's.
+                m = labels.m
+                for h in range(labels.hands):
+                    own = np.where((per >= h * m) & (per < (h + 1) * m), per - h * m, NULL)
+                    extra[:, h * m:(h + 1) * m] += continuity_logp(at, samples.frame, samples.slot, own, held_for,
+                                                                   segments, m, take.rate, *continuity)[:, :m]
             if extra.any():
                 stopped = facts["time_limited"]
                 decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
