@@ -110,16 +110,35 @@ def test_label_acts_on_the_panels_take_and_never_drops_corrections_silently(labe
 
     assert take_collection(active_after_import) == glove  # the import made the new take the active one
 
-    # Relabeling the han19 take with glove13 keeps the ghost decision (valid in any layout) and
-    # says that the ThumbTip lock cannot follow: glove13 has no ThumbTip.
+    # Relabeling a take with another layout keeps the ghost decision (valid in any layout) and says
+    # that a lock on a marker the new layout lacks cannot follow: a glove13 take labeled with han19
+    # (it warns), corrected, then labeled as glove13 (the README's "Label as glove13"). (The han19
+    # take relabeled with glove13, as this test did before, is refused now: no glove13 hand in it.)
     settings.take = syn
+    assert settings.layout == "han19"  # the Layout field follows the take (the one it was labeled with)
+    settings.take = glove
+    assert settings.layout == "glove13"
+    path = tmp_path / "src" / "glove1.c3d"
+    path.parent.mkdir()
+    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, path)
+    wrong = _import(bpy, path, tmp_path)
+    settings.layout = "han19"
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    for name, op in (("ThumbTip", bpy.ops.mocap_autolabel.lock), ("IndexTip", bpy.ops.mocap_autolabel.unlabel)):
+        lab = state(wrong).labeling
+        seg = _long_segment(lab, lab.names.index(name))
+        bpy.context.scene.frame_set(int(lab.start[seg]) + 2)
+        _select(bpy, labeled_objects(wrong)[lab.names.index(name)])
+        assert op() == {"FINISHED"}
+    before = state(wrong)
+    settings.layout = "glove13"
     capfd.readouterr()
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     out = capfd.readouterr().out
     unlabel = before.review.constraints[1]
-    assert state(syn).layout == "glove13" and state(syn).review.constraints == [unlabel]
+    assert state(wrong).layout == "glove13" and state(wrong).review.constraints == [unlabel]
     assert "dropped" in out and "ThumbTip on" in out and "1 correction kept" in out
-    per = state(syn).labeling.per_sample()[unlabel.start:unlabel.stop, unlabel.slot]
+    per = state(wrong).labeling.per_sample()[unlabel.start:unlabel.stop, unlabel.slot]
     assert (per[per != EMPTY] == NULL).all()
 
 
@@ -295,24 +314,29 @@ def test_the_take_field_holds_only_imported_takes(labeled):
 
 # --- bug 9: the Label operator's own properties win -------------------------------------------
 
-def test_the_label_operators_own_properties_win_over_the_panels(labeled):
-    bpy, coll = labeled
+def test_the_label_operators_own_properties_win_over_the_panels(empty_scene, bpy_module, tmp_path):
+    """On a glove13 take (labeling it with han19 only warns; a han19 take labeled with glove13 is
+    refused now, no glove13 hand in it, which this test used before)."""
+    bpy = bpy_module
+    path = tmp_path / "src" / "glove1.c3d"
+    path.parent.mkdir()
+    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, path)
+    coll = _import(bpy, path, tmp_path)
     settings = bpy.context.scene.mocap_autolabel
     assert settings.layout == "han19"
     assert bpy.ops.mocap_autolabel.label(layout="glove13") == {"FINISHED"}
     assert state(coll).layout == "glove13"
+    assert settings.layout == "han19"  # the operator's own layout did not change the panel's
     assert bpy.ops.mocap_autolabel.label(temporal="none") == {"FINISHED"}
     st = state(coll)
     assert (st.layout, st.temporal) == ("han19", "none")  # not given: the panel's layout
     # One click on the Review panel's "is this a glove13 take?" box runs Label with the suggested layout.
-    settings.layout = "glove13"
-    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
-    doubt = state(coll).labeling.info["layout_doubt"]
-    assert doubt["better"] == "han19"
+    doubt = st.labeling.info["layout_doubt"]
+    assert doubt["better"] == "glove13"
     # (the button: ui/panels.py, MOCAPAL_PT_review)
     assert bpy.ops.mocap_autolabel.label(layout=doubt["better"], use_as_panel_layout=True) == {"FINISHED"}
-    assert state(coll).layout == "han19" and "layout_doubt" not in state(coll).labeling.info
-    assert settings.layout == "han19"  # the panel now says what the take is labeled with
+    assert state(coll).layout == "glove13" and "layout_doubt" not in state(coll).labeling.info
+    assert settings.layout == "glove13"  # the panel now says what the take is labeled with
 
 
 # --- the missing pieces: shortcuts, selection after Assign, messages, progress ------------------
