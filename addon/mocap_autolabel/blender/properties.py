@@ -67,6 +67,7 @@ def _take_changed(self, context):
         self.take = review.take_collection(coll)  # calls this update again
         return
     self["walk_slot"] = -1
+    _follow_layout(self, coll)
     if coll is not None and review.has_review(coll):
         review.recolor(self.id_data, coll)
         refresh_uncertain(self.id_data, coll, review.load_state(coll).labeling)
@@ -74,6 +75,29 @@ def _take_changed(self, context):
         self.uncertain.clear()
         self.corrections.clear()
         self.uncertain_total = 0
+
+
+#: The take's custom property holding the layout last in the panel's Layout field while the take was
+#: in the Take field (the user's choice, or the one the import picked from the file's point names).
+LAYOUT_CHOICE = "mocap_layout_choice"
+
+
+def _follow_layout(self, coll) -> None:
+    """The Take field changed: the Layout field shows the new take's layout (the one chosen for it, else
+    the one it was labeled with), so that Label does not label it with another take's layout."""
+    from . import review
+
+    if coll is None:
+        return
+    layout = coll.get(LAYOUT_CHOICE) or (review.load_state(coll).layout if review.has_review(coll) else None)
+    if layout in builtin_layouts() and (layout != self.layout or self.layout_file):
+        self.layout, self.layout_file = layout, ""
+
+
+def _layout_changed(self, context):
+    """The Layout field changed: the take in the Take field remembers it (see :func:`_follow_layout`)."""
+    if is_take(self, self.take):
+        self.take[LAYOUT_CHOICE] = self.layout
 
 
 def _sure_changed(self, context):
@@ -109,7 +133,7 @@ class MOCAPAL_PG_correction(bpy.types.PropertyGroup):
 class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     take: PointerProperty(type=bpy.types.Collection, name="Take", update=_take_changed, poll=is_take,
                           description="The imported take to label and review")
-    layout: EnumProperty(name="Layout", items=_layouts, default=LAYOUT_DEFAULT,
+    layout: EnumProperty(name="Layout", items=_layouts, default=LAYOUT_DEFAULT, update=_layout_changed,
                          description="Marker layout to label with")
     layout_file: StringProperty(name="Layout File", subtype="FILE_PATH",
                                 description="A layout .toml instead of a built-in layout")

@@ -65,12 +65,34 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
             collection = build_take(take, context.scene, options)
             context.scene.mocap_autolabel.take = collection  # the take the Mocap panel works on
             _make_active(context, collection)
+            picked = _pick_layout(context, collection, take)
             for warning in take.warnings:
                 self.report({"WARNING"}, f"{os.path.basename(path)}: {warning}")
             self.report({"INFO"}, f"Imported {len(collection.objects)} markers x {take.n_frames} frames "
-                                  f"from {os.path.basename(path)}")
+                                  f"from {os.path.basename(path)}"
+                                  + (f"; Layout set to {picked}: the file names every {picked} marker"
+                                     if picked else ""))
             imported += 1
         return {"FINISHED"} if imported else {"CANCELLED"}
+
+
+def _pick_layout(context, collection, take) -> str | None:
+    """Where the file's point names include every marker name of a built-in layout, put that layout in
+    the panel's Layout field for the new take (unless a layout was chosen for this take already);
+    returns it, or None. Either way the take remembers the Layout the panel shows for it, which comes
+    back when the Take field returns to it."""
+    from ..blender.properties import LAYOUT_CHOICE
+    from ..core.layout import layout_for_names
+
+    settings = context.scene.mocap_autolabel
+    picked = layout_for_names(take.names)
+    if picked is None or LAYOUT_CHOICE in collection:
+        if LAYOUT_CHOICE not in collection and not settings.layout_file:
+            collection[LAYOUT_CHOICE] = settings.layout  # what the panel showed for it: back when it comes back
+        return None
+    settings.layout, settings.layout_file = picked, ""  # the take remembers it (the field's update)
+    collection[LAYOUT_CHOICE] = picked
+    return picked
 
 
 def _make_active(context, collection) -> None:
