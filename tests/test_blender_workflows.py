@@ -182,3 +182,18 @@ def test_two_takes_in_one_scene_a_bad_file_between_save_reopen_export(empty_scen
         assert (per[~src.valid] == EMPTY).all() and ((per == NULL) | (per >= 0))[src.valid].all()
     # The glove's named body and pillow points keep their names in the export.
     assert {"right_elbow", "pillow_top"} <= set(read_take(tmp_path / "recording_part1_labeled.c3d").names)
+
+
+def test_label_blend_refuses_a_two_hand_take_in_one_line(bpy_module, tmp_path, capsys):
+    """README: "label --blend refuses a two-hand take and says so": one line, exit status 1, not an
+    "unexpected ValueError" (it was), and no .blend written."""
+    from mocap_autolabel.cli import main
+
+    two = tmp_path / "two.c3d"
+    assert main(["synth", "--hands", "2", "--frames", "400", "--seed", "3", "-o", str(two)]) == 0
+    capsys.readouterr()
+    blend = tmp_path / "two.blend"
+    assert main(["label", str(two), "--blend", str(blend)]) == 1
+    err = capsys.readouterr().err
+    assert "a review scene (--blend) holds one hand for now; the take holds two" in err
+    assert "unexpected" not in err and not blend.exists()

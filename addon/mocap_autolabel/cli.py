@@ -464,7 +464,7 @@ def _label(args) -> int:
                               validate=args.validate, hand=hand, **_hand_options(args),
                               fit=labeled if args.method == "gmm" else None,
                               start=labeled[0] if (labeled is not None and args.method == "nearest") else None,
-                              progress=bar, done=bar.share, **_hand_options(args))
+                              progress=bar, done=bar.share)
         bar("checking the layout and the hand", 1.0)
         two = labeling.info["hands"]["count"] == 2
         doubt = None if two else layout_doubt(take, layout, labeling)
@@ -482,8 +482,9 @@ def _label(args) -> int:
             write_c3d(labeled_take(take, labeling), args.output)
         solved = None
         if args.blend and labeling.info["hands"]["count"] == 2:
-            raise ValueError("a review scene (--blend) holds one hand for now; the take holds two: label it "
-                             "with --hands 1, or write the labeled C3D (-o) and solve it (solve --blend)")
+            raise MocapInputError(args.file, "a review scene (--blend) holds one hand for now; the take holds two: "
+                                             "label it with --hands 1, or write the labeled C3D (-o) and solve it "
+                                             "(solve --blend)")
         if args.solve_hand:
             from .core.pipeline import solve_take
 
