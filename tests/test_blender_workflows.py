@@ -91,6 +91,16 @@ def test_the_layout_is_picked_from_the_files_point_names(empty_scene, bpy_module
     # A second import of the same file is a new take: it gets the pick again.
     again = _import(bpy, _glove(), tmp_path)
     assert again != glove and settings.layout == "glove13"
+    # A take that names no layout's markers does not inherit another take's pick: it gets the layout
+    # the user chose last (han19, for the glove take above).
+    (tmp_path / "b").mkdir()
+    demo2 = _import(bpy, DEMO, tmp_path / "b")
+    assert settings.layout == "han19"
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"} and _state(demo2).layout == "han19"
+    settings.layout = "glove13"  # chosen by the user: the next take that names nothing gets it
+    (tmp_path / "c").mkdir()
+    _import(bpy, DEMO, tmp_path / "c")
+    assert settings.layout == "glove13"
 
 
 def test_two_takes_in_one_scene_a_bad_file_between_save_reopen_export(empty_scene, bpy_module, tmp_path, capfd):

@@ -82,6 +82,23 @@ def _take_changed(self, context):
 LAYOUT_CHOICE = "mocap_layout_choice"
 
 
+#: The settings' custom property holding the layout the user last put in the Layout field (a new
+#: take whose point names pick no layout gets it, not another take's pick).
+USER_LAYOUT = "user_layout"
+_automatic = []  # not empty while set_layout writes the field
+
+
+def set_layout(settings, layout: str) -> None:
+    """Put a built-in layout in the Layout field for the take in the Take field (picked from its point
+    names, or the take's own), not as the user's choice."""
+    _automatic.append(layout)
+    try:
+        if layout != settings.layout or settings.layout_file:
+            settings.layout, settings.layout_file = layout, ""
+    finally:
+        _automatic.pop()
+
+
 def _follow_layout(self, coll) -> None:
     """The Take field changed: the Layout field shows the new take's layout (the one chosen for it, else
     the one it was labeled with), so that Label does not label it with another take's layout."""
@@ -90,14 +107,17 @@ def _follow_layout(self, coll) -> None:
     if coll is None:
         return
     layout = coll.get(LAYOUT_CHOICE) or (review.load_state(coll).layout if review.has_review(coll) else None)
-    if layout in builtin_layouts() and (layout != self.layout or self.layout_file):
-        self.layout, self.layout_file = layout, ""
+    if layout in builtin_layouts():
+        set_layout(self, layout)
 
 
 def _layout_changed(self, context):
-    """The Layout field changed: the take in the Take field remembers it (see :func:`_follow_layout`)."""
+    """The Layout field changed: the take in the Take field remembers it (see :func:`_follow_layout`),
+    and where the user changed it, so do the settings (:data:`USER_LAYOUT`)."""
     if is_take(self, self.take):
         self.take[LAYOUT_CHOICE] = self.layout
+    if not _automatic:
+        self[USER_LAYOUT] = self.layout
 
 
 def _sure_changed(self, context):

@@ -79,18 +79,24 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
 def _pick_layout(context, collection, take) -> str | None:
     """Where the file's point names include every marker name of a built-in layout, put that layout in
     the panel's Layout field for the new take (unless a layout was chosen for this take already);
-    returns it, or None. Either way the take remembers the Layout the panel shows for it, which comes
-    back when the Take field returns to it."""
-    from ..blender.properties import LAYOUT_CHOICE
-    from ..core.layout import layout_for_names
+    returns it, or None. A take that names no layout's markers gets the layout the user chose last (not
+    an earlier take's pick). Either way the take remembers the Layout the panel shows for it, which
+    comes back when the Take field returns to it."""
+    from ..blender.properties import LAYOUT_CHOICE, USER_LAYOUT, set_layout
+    from ..core.layout import DEFAULT_LAYOUT, builtin_layouts, layout_for_names
 
     settings = context.scene.mocap_autolabel
-    picked = layout_for_names(take.names)
-    if picked is None or LAYOUT_CHOICE in collection:
-        if LAYOUT_CHOICE not in collection and not settings.layout_file:
-            collection[LAYOUT_CHOICE] = settings.layout  # what the panel showed for it: back when it comes back
+    if LAYOUT_CHOICE in collection:
         return None
-    settings.layout, settings.layout_file = picked, ""  # the take remembers it (the field's update)
+    picked = layout_for_names(take.names)
+    if picked is None:
+        if not settings.layout_file:
+            # Not another take's pick: the layout the user chose last (han19 where they chose none).
+            working = settings.get(USER_LAYOUT, DEFAULT_LAYOUT)
+            set_layout(settings, working if working in builtin_layouts() else DEFAULT_LAYOUT)
+            collection[LAYOUT_CHOICE] = settings.layout  # shown again when the Take field comes back to it
+        return None
+    set_layout(settings, picked)
     collection[LAYOUT_CHOICE] = picked
     return picked
 
