@@ -42,6 +42,17 @@ def test_truncated_real_file(tmp_path):
     assert "truncated" in _error(cut)
 
 
+def test_a_cut_off_text_file_says_which_row_is_short(tmp_path):
+    """The glove recording cut mid-row: the row and its column count, not numpy's "Some errors were
+    detected !" (as Blender's import showed it)."""
+    src = data_path("hands", "qualisys_glove13", "recording_part1.tsv")
+    cut = tmp_path / "glove_cut.tsv"
+    cut.write_bytes(src.read_bytes()[:5000])
+    message = _error(cut)
+    assert "malformed marker table: data row 7 has 55 columns instead of 65 (is the file cut off" in message
+    assert "Some errors" not in message
+
+
 def test_random_bytes(tmp_path):
     path = tmp_path / "noise.c3d"
     path.write_bytes(np.random.default_rng(1).integers(0, 256, 20000, dtype=np.uint8).tobytes())

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mocap_autolabel.core.formats.c3d import write_c3d
+from mocap_autolabel.core.labeling import EMPTY, NULL
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.review import KEY_TYPES, marker_classes, uncertain_segments
 from mocap_autolabel.core.synth.generate import synthesize
@@ -109,12 +110,36 @@ def test_label_acts_on_the_panels_take_and_never_drops_corrections_silently(labe
 
     assert take_collection(active_after_import) == glove  # the import made the new take the active one
 
-    # Relabeling the han19 take with glove13 finds no hand (the CLI's and batch's rule): refused,
-    # and the take keeps its labels and both corrections.
+    # Relabeling a take with another layout keeps the ghost decision (valid in any layout) and says
+    # that a lock on a marker the new layout lacks cannot follow: a glove13 take labeled with han19
+    # (it warns), corrected, then labeled as glove13 (the README's "Label as glove13"). (The han19
+    # take relabeled with glove13, as this test did before, is refused now: no glove13 hand in it.)
     settings.take = syn
-    with pytest.raises(RuntimeError, match="no hand found"):
-        bpy.ops.mocap_autolabel.label()
-    assert state(syn).layout == "han19" and state(syn).review.constraints == before.review.constraints
+    assert settings.layout == "han19"  # the Layout field follows the take (the one it was labeled with)
+    settings.take = glove
+    assert settings.layout == "glove13"
+    path = tmp_path / "src" / "glove1.c3d"
+    path.parent.mkdir()
+    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, path)
+    wrong = _import(bpy, path, tmp_path)
+    settings.layout = "han19"
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    for name, op in (("ThumbTip", bpy.ops.mocap_autolabel.lock), ("IndexTip", bpy.ops.mocap_autolabel.unlabel)):
+        lab = state(wrong).labeling
+        seg = _long_segment(lab, lab.names.index(name))
+        bpy.context.scene.frame_set(int(lab.start[seg]) + 2)
+        _select(bpy, labeled_objects(wrong)[lab.names.index(name)])
+        assert op() == {"FINISHED"}
+    before = state(wrong)
+    settings.layout = "glove13"
+    capfd.readouterr()
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    out = capfd.readouterr().out
+    unlabel = before.review.constraints[1]
+    assert state(wrong).layout == "glove13" and state(wrong).review.constraints == [unlabel]
+    assert "dropped" in out and "ThumbTip on" in out and "1 correction kept" in out
+    per = state(wrong).labeling.per_sample()[unlabel.start:unlabel.stop, unlabel.slot]
+    assert (per[per != EMPTY] == NULL).all()
 
 
 def test_the_issue_scenario_on_the_real_glove_recording(empty_scene, bpy_module, tmp_path):
@@ -289,29 +314,24 @@ def test_the_take_field_holds_only_imported_takes(labeled):
 
 # --- bug 9: the Label operator's own properties win -------------------------------------------
 
-def test_the_label_operators_own_properties_win_over_the_panels(labeled):
-    bpy, coll = labeled
-    settings = bpy.context.scene.mocap_autolabel
-    assert settings.temporal == "vote"
-    assert bpy.ops.mocap_autolabel.label(temporal="none") == {"FINISHED"}
-    assert state(coll).temporal == "none"
-    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
-    assert state(coll).temporal == "vote"  # not given: the panel's
-    # A layout given to the operator wins too: glove13 finds no hand on this han19 take, and says
-    # so in the operator's own terms, where the panel's han19 labels it.
-    with pytest.raises(RuntimeError, match="no hand found.*glove13"):
-        bpy.ops.mocap_autolabel.label(layout="glove13")
-    assert state(coll).layout == "han19"
-
-
-def test_one_click_relabels_with_the_layout_the_review_panel_suggests(empty_scene, bpy_module, tmp_path):
-    from conftest import data_path
-
+def test_the_label_operators_own_properties_win_over_the_panels(empty_scene, bpy_module, tmp_path):
+    """On a glove13 take (labeling it with han19 only warns; a han19 take labeled with glove13 is
+    refused now, no glove13 hand in it, which this test used before)."""
     bpy = bpy_module
-    coll = _import(bpy, data_path("hands", "qualisys_glove13", "recording_part1.tsv"), tmp_path)
+    path = tmp_path / "src" / "glove1.c3d"
+    path.parent.mkdir()
+    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, path)
+    coll = _import(bpy, path, tmp_path)
     settings = bpy.context.scene.mocap_autolabel
-    assert bpy.ops.mocap_autolabel.label(layout="han19") == {"FINISHED"}
-    doubt = state(coll).labeling.info["layout_doubt"]
+    assert settings.layout == "han19"
+    assert bpy.ops.mocap_autolabel.label(layout="glove13") == {"FINISHED"}
+    assert state(coll).layout == "glove13"
+    assert settings.layout == "han19"  # the operator's own layout did not change the panel's
+    assert bpy.ops.mocap_autolabel.label(temporal="none") == {"FINISHED"}
+    st = state(coll)
+    assert (st.layout, st.temporal) == ("han19", "none")  # not given: the panel's layout
+    # One click on the Review panel's "is this a glove13 take?" box runs Label with the suggested layout.
+    doubt = st.labeling.info["layout_doubt"]
     assert doubt["better"] == "glove13"
     # (the button: ui/panels.py, MOCAPAL_PT_review)
     assert bpy.ops.mocap_autolabel.label(layout=doubt["better"], use_as_panel_layout=True) == {"FINISHED"}

@@ -74,6 +74,7 @@ def _take_changed(self, context):
         self.take = review.take_collection(coll)  # calls this update again
         return
     self["walk_slot"] = -1
+    _follow_layout(self, coll)
     if coll is not None and review.has_review(coll):
         review.recolor(self.id_data, coll)
         refresh_uncertain(self.id_data, coll, review.load_state(coll).labeling)
@@ -81,6 +82,49 @@ def _take_changed(self, context):
         self.uncertain.clear()
         self.corrections.clear()
         self.uncertain_total = 0
+
+
+#: The take's custom property holding the layout last in the panel's Layout field while the take was
+#: in the Take field (the user's choice, or the one the import picked from the file's point names).
+LAYOUT_CHOICE = "mocap_layout_choice"
+
+
+#: The settings' custom property holding the layout the user last put in the Layout field (a new
+#: take whose point names pick no layout gets it, not another take's pick).
+USER_LAYOUT = "user_layout"
+_automatic = []  # not empty while set_layout writes the field
+
+
+def set_layout(settings, layout: str) -> None:
+    """Put a built-in layout in the Layout field for the take in the Take field (picked from its point
+    names, or the take's own), not as the user's choice."""
+    _automatic.append(layout)
+    try:
+        if layout != settings.layout or settings.layout_file:
+            settings.layout, settings.layout_file = layout, ""
+    finally:
+        _automatic.pop()
+
+
+def _follow_layout(self, coll) -> None:
+    """The Take field changed: the Layout field shows the new take's layout (the one chosen for it, else
+    the one it was labeled with), so that Label does not label it with another take's layout."""
+    from . import review
+
+    if coll is None:
+        return
+    layout = coll.get(LAYOUT_CHOICE) or (review.load_state(coll).layout if review.has_review(coll) else None)
+    if layout in builtin_layouts():
+        set_layout(self, layout)
+
+
+def _layout_changed(self, context):
+    """The Layout field changed: the take in the Take field remembers it (see :func:`_follow_layout`),
+    and where the user changed it, so do the settings (:data:`USER_LAYOUT`)."""
+    if is_take(self, self.take):
+        self.take[LAYOUT_CHOICE] = self.layout
+    if not _automatic:
+        self[USER_LAYOUT] = self.layout
 
 
 def _sure_changed(self, context):
@@ -116,7 +160,7 @@ class MOCAPAL_PG_correction(bpy.types.PropertyGroup):
 class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     take: PointerProperty(type=bpy.types.Collection, name="Take", update=_take_changed, poll=is_take,
                           description="The imported take to label and review")
-    layout: EnumProperty(name="Layout", items=_layouts, default=LAYOUT_DEFAULT,
+    layout: EnumProperty(name="Layout", items=_layouts, default=LAYOUT_DEFAULT, update=_layout_changed,
                          description="Marker layout to label with")
     layout_file: StringProperty(name="Layout File", subtype="FILE_PATH",
                                 description="A layout .toml instead of a built-in layout")

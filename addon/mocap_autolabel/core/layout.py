@@ -127,6 +127,19 @@ def builtin_layouts() -> list[str]:
     return sorted(p.name.removesuffix(".toml") for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
+def layout_for_names(names) -> str | None:
+    """The built-in layout whose every marker name is among a take's point names (case-insensitive, a
+    ``subject:`` prefix ignored), the one with most markers where several are (a han19 file also names
+    every tips5 marker); None where none is."""
+    have = {str(n).strip().rsplit(":", 1)[-1].lower() for n in names}
+    best = None
+    for name in builtin_layouts():
+        markers = load_layout(name).names
+        if all(m.lower() in have for m in markers) and (best is None or len(markers) > best[1]):
+            best = (name, len(markers))
+    return best[0] if best else None
+
+
 def load_layout(name_or_path: str | os.PathLike) -> Layout:
     """A built-in layout by name (``han19``) or a layout TOML file by path.
 

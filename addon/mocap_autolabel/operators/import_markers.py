@@ -65,12 +65,40 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
             collection = build_take(take, context.scene, options)
             context.scene.mocap_autolabel.take = collection  # the take the Mocap panel works on
             _make_active(context, collection)
+            picked = _pick_layout(context, collection, take)
             for warning in take.warnings:
                 self.report({"WARNING"}, f"{os.path.basename(path)}: {warning}")
             self.report({"INFO"}, f"Imported {len(collection.objects)} markers x {take.n_frames} frames "
-                                  f"from {os.path.basename(path)}")
+                                  f"from {os.path.basename(path)}"
+                                  + (f"; Layout set to {picked}: the file names every {picked} marker"
+                                     if picked else ""))
             imported += 1
         return {"FINISHED"} if imported else {"CANCELLED"}
+
+
+def _pick_layout(context, collection, take) -> str | None:
+    """Where the file's point names include every marker name of a built-in layout, put that layout in
+    the panel's Layout field for the new take (unless a layout was chosen for this take already);
+    returns it, or None. A take that names no layout's markers gets the layout the user chose last (not
+    an earlier take's pick). Either way the take remembers the Layout the panel shows for it, which
+    comes back when the Take field returns to it."""
+    from ..blender.properties import LAYOUT_CHOICE, USER_LAYOUT, set_layout
+    from ..core.layout import DEFAULT_LAYOUT, builtin_layouts, layout_for_names
+
+    settings = context.scene.mocap_autolabel
+    if LAYOUT_CHOICE in collection:
+        return None
+    picked = layout_for_names(take.names)
+    if picked is None:
+        if not settings.layout_file:
+            # Not another take's pick: the layout the user chose last (han19 where they chose none).
+            working = settings.get(USER_LAYOUT, DEFAULT_LAYOUT)
+            set_layout(settings, working if working in builtin_layouts() else DEFAULT_LAYOUT)
+            collection[LAYOUT_CHOICE] = settings.layout  # shown again when the Take field comes back to it
+        return None
+    set_layout(settings, picked)
+    collection[LAYOUT_CHOICE] = picked
+    return picked
 
 
 def _make_active(context, collection) -> None:

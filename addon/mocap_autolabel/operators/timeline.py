@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import IntProperty
 
-from .review import reviewed_take
+from .review import reviewed_panel_take
 
 
 class MOCAPAL_OT_jump_to_worst(bpy.types.Operator):
@@ -20,15 +20,15 @@ class MOCAPAL_OT_jump_to_worst(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return reviewed_take(context) is not None
+        return reviewed_panel_take(context) is not None
 
     def execute(self, context):
         import numpy as np
 
         from ..blender.review import first_frame, load_state, object_for
-        from ..core.review import bad_runs, frame_trouble, uncertain_segments
+        from ..core.review import bad_runs, frame_trouble, plural, uncertain_segments
 
-        coll = reviewed_take(context)
+        coll = reviewed_panel_take(context)  # the Review panel's take, as Previous / Next
         lab = load_state(coll).labeling
         sure = context.scene.mocap_autolabel.sure
         runs = bad_runs(lab, sure, self.rank + 1)
@@ -48,8 +48,8 @@ class MOCAPAL_OT_jump_to_worst(bpy.types.Operator):
                 other.select_set(False)
             obj.select_set(True)
             context.view_layer.objects.active = obj
-        self.report({"INFO"}, f"Frame {peak + first_frame(coll)}: {uncertain[peak]} uncertain samples, "
-                              f"{missing[peak]} labels missing (frames {run.start + first_frame(coll)}-"
+        self.report({"INFO"}, f"Frame {peak + first_frame(coll)}: {plural(int(uncertain[peak]), 'uncertain sample')}, "
+                              f"{plural(int(missing[peak]), 'label')} missing (frames {run.start + first_frame(coll)}-"
                               f"{run.stop - 1 + first_frame(coll)})")
         return {"FINISHED"}
 

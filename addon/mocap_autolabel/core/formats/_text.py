@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import re
 
 import numpy as np
 
@@ -34,5 +35,12 @@ def marker_table(path: str, rows: list[str], first_col: int, n_markers: int) -> 
         table = np.genfromtxt(io.StringIO("\n".join(rows)), delimiter="\t", usecols=range(n_cols),
                               dtype=np.float32, filling_values=np.nan, invalid_raise=True, ndmin=2)
     except (ValueError, IndexError) as exc:
-        raise MocapInputError(path, f"malformed marker table ({str(exc).splitlines()[0]})") from None
+        # numpy says "Some errors were detected !" and then which line: say that line (a cut-off file).
+        lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+        bad = re.match(r"Line #(\d+) \(got (\d+) columns instead of (\d+)\)", lines[-1]) if lines else None
+        if bad:
+            row, got, want = bad.groups()
+            raise MocapInputError(path, f"malformed marker table: data row {row} has {got} columns instead of "
+                                        f"{want} (is the file cut off or damaged?)") from None
+        raise MocapInputError(path, f"malformed marker table ({lines[0] if lines else exc})") from None
     return table[:, first_col:].reshape(len(table), n_markers, 3)
