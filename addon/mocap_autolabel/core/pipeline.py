@@ -525,10 +525,10 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         continuity = load_continuity(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
     info["continuity"] = [float(v) for v in continuity]
 
-    def decide(scores: np.ndarray) -> Labeling:
+    def decide(scores: np.ndarray, first: Labeling | None = None) -> Labeling:
         return _decide(scores, batch, take, hand_labels, method, temporal, segments, locked_at, info, score, p, q,
                        split_swaps, n_best, calibrate, null_prior, crossings, switch_cost, partner,
-                       continuity)
+                       continuity, first)
 
     say(f"temporal step: {temporal}")
     t = time.perf_counter()
@@ -543,7 +543,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             t = time.perf_counter()
             joint = _two_hand_scores(take_in, layout, found, batch, labeler, rows, joint)
             scores = _apply_constraints(joint, slots, mask, constraints)
-            labeling = decide(scores)
+            labeling = decide(scores, first=labeling)
             times["hands_again"] = time.perf_counter() - t
         info["hands_offered_again"] = offered
     share(decided)
@@ -588,8 +588,11 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
             segments: Segments, locked_at: np.ndarray, info: dict, score: str, p: float, q: float,
             split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float],
             crossings: dict[int, list[int]], switch_cost: tuple[float, float],
-            partner: tuple[float, float] | None, continuity: tuple[float, float]) -> Labeling:
-    """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences."""
+            partner: tuple[float, float] | None, continuity: tuple[float, float],
+            first: Labeling | None = None) -> Labeling:
+    """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences. With ``first``
+    (an earlier labeling of the take), the evidence of rigid partners and continuity is read off it
+    and one vote is held, instead of a first vote to read it off."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
     layout, n_labels = labels.layout, len(labels)
@@ -604,27 +607,34 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
             return vote(scored, segments, locked_at, score, p, q, split_swaps, null_prior=null_prior,
                         crossings=crossings, switch_cost=switch_cost)
 
-        decided, label, seg, facts = run_vote(samples)
         rigid = labels.rigid_pairs() if partner and any(partner) else None
         with_rigid, with_continuity = rigid is not None and len(rigid) > 0, any(continuity)
+        if first is not None and (with_rigid or with_continuity):
+            facts = {"time_limited": 0}
+            ids = first.segment_ids()[samples.frame, samples.slot]
+            per = np.where(ids >= 0, first.label[np.maximum(ids, 0)], NULL).astype(np.int64)
+            held = np.where(ids >= 0, first.length[np.maximum(ids, 0)], 0)
+        else:
+            decided, label, seg, facts = run_vote(samples)
+            per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
         if with_rigid or with_continuity:
             # Vote again with the evidence of rigid partners and of continuity, read off the first
             # vote's labels.
             extra = np.zeros_like(samples.logp)
-            per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
             at = points[f_idx, k_idx].astype(np.float64)
             if with_rigid:
                 rigid = take_distances(rigid, at, samples.frame, per, n_labels)
                 extra += partner_logp(at, samples.frame, per, n_labels, rigid, *partner)
             if with_continuity:
-                held_for = np.where(seg >= 0, (decided.stop - decided.start)[np.maximum(seg, 0)], 0)
+                held_for = held if first is not None else \
+                    np.where(seg >= 0, (decided.stop - decided.start)[np.maximum(seg, 0)], 0)
                 # Per hand: a marker's neighbours, whose motion carries it across a gap, are its own hand's.
                 m = labels.m
                 for h in range(labels.hands):
                     own = np.where((per >= h * m) & (per < (h + 1) * m), per - h * m, NULL)
                     extra[:, h * m:(h + 1) * m] += continuity_logp(at, samples.frame, samples.slot, own, held_for,
                                                                    segments, m, take.rate, *continuity)[:, :m]
-            if extra.any():
+            if extra.any() or first is not None:
                 stopped = facts["time_limited"]
                 decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
                 facts["time_limited"] += stopped
