@@ -544,3 +544,18 @@ def test_gmm_labels_in_blender_without_a_fit_take(empty_scene, bpy_module, take_
     settings.method = "gmm"
     assert bpy_module.ops.mocap_autolabel.label() == {"FINISHED"}
     assert state(settings.take).labeling.info["method"] == "gmm"
+
+
+def test_the_panel_says_why_perm_leaves_every_segment_for_review(empty_scene, bpy_module):
+    from conftest import ROOT
+    from mocap_autolabel.blender.review import load_state, summary
+
+    bpy = bpy_module
+    assert bpy.ops.mocap_autolabel.import_markers(filepath=str(ROOT / "samples" / "demo_take.c3d")) == {"FINISHED"}
+    coll = empty_scene.mocap_autolabel.take
+    sure = empty_scene.mocap_autolabel.sure
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    assert not summary(load_state(coll).labeling, sure)["never_confident"]  # set is trusted
+    assert bpy.ops.mocap_autolabel.label(method="perm") == {"FINISHED"}
+    s = summary(load_state(coll).labeling, sure)
+    assert s["never_confident"] and s["confident"] == 0.0

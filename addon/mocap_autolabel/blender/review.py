@@ -433,7 +433,9 @@ def summary(labeling: Labeling, sure: float) -> dict:
     return {"labels": f"{len(present)} / {len(labeling.names)}", "confident": s["confident_share"] * 100,
             "uncertain": len(uncertain_segments(labeling, sure)),
             "locked": int(labeling.locked.sum()), "layout_doubt": doubt and LayoutDoubt(**doubt),
-            "hands": hands, "hands_warning": facts.get("warning")}
+            "hands": hands, "hands_warning": facts.get("warning"),
+            # perm and cnn: their calibrated confidence never reaches the bar (see the CLI's note)
+            "never_confident": bool(labeling.info.get("never_confident"))}
 
 
 def legend() -> list[tuple[str, str]]:

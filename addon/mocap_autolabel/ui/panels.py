@@ -78,6 +78,11 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         box.label(text=f"Labels present: {s['labels']}")
         box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
         box.label(text=f"Uncertain segments: {s['uncertain']}   Locked: {s['locked']}")
+        if s["never_confident"]:  # calibrated, and honestly never sure: every segment is for review
+            col = layout.box().column(align=True)
+            col.label(text=f"{state.method} + {state.temporal} never rates a segment confident", icon="INFO")
+            col.label(text="(none was right 99.9 % of the time in validation):")
+            col.label(text="every segment is left for review; set is the method to trust")
         if s["layout_doubt"]:
             d = s["layout_doubt"]
             col = layout.box().column(align=True)
