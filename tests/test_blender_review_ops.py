@@ -4,11 +4,13 @@ and messages. Each test failed on the code before its fix."""
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import import_take as _import
+from helpers import review_state as state
+from helpers import select as _select
 from mocap_autolabel.core.formats.c3d import write_c3d
 from mocap_autolabel.core.labeling import EMPTY, NULL
 from mocap_autolabel.core.layout import load_layout
@@ -31,12 +33,6 @@ def take_files(tmp_path_factory):
     return out
 
 
-def _import(bpy, path, tmp_path):
-    path = shutil.copy(path, tmp_path / Path(path).name)
-    assert bpy.ops.mocap_autolabel.import_markers(filepath=str(path)) == {"FINISHED"}
-    return bpy.context.scene.mocap_autolabel.take
-
-
 @pytest.fixture
 def labeled(empty_scene, bpy_module, take_files, tmp_path):
     bpy = bpy_module
@@ -45,22 +41,8 @@ def labeled(empty_scene, bpy_module, take_files, tmp_path):
     return bpy, coll
 
 
-def state(coll):
-    from mocap_autolabel.blender.review import load_state
-
-    return load_state(coll)
-
-
 def labeled_objects(coll):
     return {int(o["mocap_label"]): o for o in coll["mocap_labeled"].objects}
-
-
-def _select(bpy, *objs):
-    for o in bpy.context.selected_objects:
-        o.select_set(False)
-    for o in objs:
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = objs[0] if objs else None
 
 
 def _long_segment(lab, label):

@@ -5,11 +5,11 @@ both hands by their side names, and the headless review scene (``label --blend``
 
 from __future__ import annotations
 
-import shutil
-from pathlib import Path
-
 import numpy as np
 import pytest
+from helpers import import_take as _import
+from helpers import review_state as _state
+from helpers import select as _select
 from mocap_autolabel.core.formats.c3d import write_c3d
 from mocap_autolabel.core.hands import split_hands
 from mocap_autolabel.core.layout import load_layout
@@ -29,12 +29,6 @@ def two_hands(tmp_path_factory):
     return path, synth.labels
 
 
-def _import(bpy, path, tmp_path):
-    path = shutil.copy(path, tmp_path / Path(path).name)
-    assert bpy.ops.mocap_autolabel.import_markers(filepath=str(path)) == {"FINISHED"}
-    return bpy.context.scene.mocap_autolabel.take
-
-
 @pytest.fixture
 def labeled(empty_scene, bpy_module, two_hands, tmp_path):
     bpy = bpy_module
@@ -43,22 +37,8 @@ def labeled(empty_scene, bpy_module, two_hands, tmp_path):
     return bpy, coll
 
 
-def _state(coll):
-    from mocap_autolabel.blender.review import load_state
-
-    return load_state(coll)
-
-
 def _objects(coll) -> dict[int, object]:
     return {int(o["mocap_label"]): o for o in coll["mocap_labeled"].all_objects}
-
-
-def _select(bpy, *objs):
-    for o in bpy.context.selected_objects:
-        o.select_set(False)
-    for o in objs:
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = objs[0]
 
 
 def _frame_with(lab, label: int, at_least: int = 0) -> tuple[int, int]:

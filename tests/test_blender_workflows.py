@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import data_path
+from helpers import review_state as _state
+from helpers import select as _select
 from mocap_autolabel.core.labeling import EMPTY, NULL
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -18,20 +20,6 @@ DEMO = ROOT / "samples" / "demo_take.c3d"
 
 def _glove():
     return data_path("hands", "qualisys_glove13", "recording_part1.tsv")
-
-
-def _state(coll):
-    from mocap_autolabel.blender.review import load_state
-
-    return load_state(coll)
-
-
-def _select(bpy, *objs):
-    for o in bpy.context.selected_objects:
-        o.select_set(False)
-    for o in objs:
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = objs[0] if objs else None
 
 
 def _import(bpy, path, folder):

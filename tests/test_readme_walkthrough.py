@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import review_state as _state
+from helpers import select as _select
 from mocap_autolabel.core.labeling import EMPTY, NULL, unlabeled_point_names
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.review import KEY_TYPES, marker_classes, null_classes, uncertain_segments
@@ -16,20 +18,6 @@ from mocap_autolabel.core.review import KEY_TYPES, marker_classes, null_classes,
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "samples" / "demo_take.c3d"
 FIX_OPERATORS = ("assign_label", "swap_labels", "unlabel", "split", "lock", "unlock", "delete_correction")
-
-
-def _state(coll):
-    from mocap_autolabel.blender.review import load_state
-
-    return load_state(coll)
-
-
-def _select(bpy, *objs):
-    for o in bpy.context.selected_objects:
-        o.select_set(False)
-    for o in objs:
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = objs[0] if objs else None
 
 
 def _keys(obj):

@@ -16,6 +16,7 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from ..blender.properties import HANDS_ITEMS, LAYOUT_DEFAULT, TEMPORAL_ITEMS, _layouts, _methods
+from .modal import start_modal
 
 
 def _is_take(coll) -> bool:
@@ -320,12 +321,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
             self._pending = self._request(context)
         except Exception as exc:
             return self._fail(exc, coll_name)
-        self._job = Job(lambda say: self._pending.run(say, check_layout=True)).start()
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.1, window=context.window)
-        wm.modal_handler_add(self)
-        wm.progress_begin(0, 100)
-        return {"RUNNING_MODAL"}
+        return start_modal(self, context, Job(lambda say: self._pending.run(say, check_layout=True)))
 
     def modal(self, context, event):
         job = self._job

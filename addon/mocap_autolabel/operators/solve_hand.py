@@ -15,6 +15,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
 
 from ..blender.properties import LAYOUT_DEFAULT, _layouts
 from ..core.hands import SIDES
+from .modal import start_modal
 from .review import context_take, reviewed_take
 
 
@@ -222,12 +223,7 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         from ..core.jobs import Job
 
         self._pending = request
-        self._job = Job(request.run).start()
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.1, window=context.window)
-        wm.modal_handler_add(self)
-        wm.progress_begin(0, 100)
-        return {"RUNNING_MODAL"}
+        return start_modal(self, context, Job(request.run))
 
     def modal(self, context, event):
         job, request = self._job, self._pending
