@@ -180,3 +180,32 @@ def test_two_takes_in_one_scene_a_bad_file_between_save_reopen_export(empty_scen
         assert (per[~src.valid] == EMPTY).all() and ((per == NULL) | (per >= 0))[src.valid].all()
     # The glove's named body and pillow points keep their names in the export.
     assert {"right_elbow", "pillow_top"} <= set(read_take(tmp_path / "recording_part1_labeled.c3d").names)
+
+
+def test_the_layout_is_picked_from_the_takes_shape_when_nobody_chose_one(empty_scene, bpy_module, tmp_path):
+    """An unnamed glove13 take, labeled with the default layout (nobody chose one): the take's shape
+    picks glove13, and Label says so; a layout the user chose is kept (and only warned about)."""
+    from helpers import import_take
+    from mocap_autolabel.core.formats.c3d import write_c3d
+    from mocap_autolabel.core.layout import load_layout
+    from mocap_autolabel.core.synth.generate import synthesize
+
+    bpy = bpy_module
+    path = tmp_path / "src" / "gloveless.c3d"
+    path.parent.mkdir()
+    write_c3d(synthesize(load_layout("glove13"), 600, seed=21).take, path)
+    coll = import_take(bpy, path, tmp_path)
+    settings = bpy.context.scene.mocap_autolabel
+    assert settings.layout == "han19" and not settings.get("user_layout")
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    assert _state(coll).layout == "glove13" and settings.layout == "glove13"
+    assert _state(coll).labeling.summary()["confident_share"] > 0.5
+    # Chosen by the user, han19 stays: refused or warned, never replaced.
+    settings.layout = "han19"
+    try:
+        result = bpy.ops.mocap_autolabel.label()
+    except RuntimeError as exc:  # no han19 hand in a glove13 take
+        assert "no hand found" in str(exc)
+        assert _state(coll).layout == "glove13"
+    else:
+        assert result == {"FINISHED"} and _state(coll).layout == "han19"

@@ -536,6 +536,10 @@ class LabelRequest:
     #: the share of the run done (0-1), written by :meth:`run` as its stages start
     done: float = 0.0
     stage: str = ""
+    #: the layout was not chosen by the user: where another built-in layout fits the take clearly
+    #: better (:func:`.core.pipeline.layout_doubt`), :meth:`run` labels with that one instead
+    pick_layout: bool = False
+    picked: dict | None = None  # what :meth:`run` picked: {"from", "to", "share", "better_share"}
 
     def run(self, say=None, check_layout: bool = False) -> Labeling:
         """The labeling; with ``check_layout``, ``info["layout_doubt"]`` (a :class:`LayoutDoubt` as a
@@ -565,6 +569,16 @@ class LabelRequest:
             one = labeling.info.get("hands", {}).get("count", 1) == 1
             staged("checking the layout against the other built-in layouts" if one else "checking both hands")
             doubt = layout_doubt(self.take, self.layout, labeling) if one else None
+            if doubt and self.pick_layout and not self.review.constraints and not self.review.splits:
+                # The take's shape says which layout it is: label with that one (the user chose none).
+                staged(f"checking: the take fits {doubt.better} better, labeling with it")
+                better = load_layout(doubt.better)
+                labeling = label_take(self.take, better, method=self.method, temporal=self.temporal,
+                                      progress=staged, **self.hand_options)
+                self.picked = {"from": self.layout.name, "to": doubt.better, "share": doubt.share,
+                               "better_share": doubt.better_share}
+                self.layout, self.layout_ref, self.previous = better, doubt.better, None
+                doubt = None
             checks = hand_checks(self.take, self.layout, labeling, doubt)
             if not any(check.found for _, check in checks):
                 raise MocapInputError(self.take_name, checks[0][1].describe("Layout {} in the Mocap tab"))

@@ -233,11 +233,22 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         return {name: getattr(self if given[name] else panel, name) for name in self.SETTINGS}
 
     def _request(self, context):
-        from ..blender.review import prepare_label
+        from ..blender.properties import LAYOUT_CHOICE, USER_LAYOUT
+        from ..blender.review import has_review, prepare_label
+        from ..core.layout import DEFAULT_LAYOUT
 
         src = self._settings(context)
         layout = bpy.path.abspath(src["layout_file"]) if src["layout_file"] else src["layout"]
-        return prepare_label(panel_take(context), layout, src["method"], src["temporal"], src["hands"])
+        take = panel_take(context)
+        request = prepare_label(take, layout, src["method"], src["temporal"], src["hands"])
+        # A take's first labeling with a layout nobody chose (not given to the operator, never set in
+        # the panel, not picked from the file's names): the take's shape may pick another
+        # (see LabelRequest.pick_layout).
+        given = self.properties.is_property_set("layout") or self.properties.is_property_set("layout_file")
+        settings = context.scene.mocap_autolabel
+        request.pick_layout = not (given or src["layout_file"] or settings.get(USER_LAYOUT) or has_review(take)
+                                   or take.get(LAYOUT_CHOICE) not in (None, DEFAULT_LAYOUT))
+        return request
 
     def _fail(self, exc: Exception, coll_name: str) -> set[str]:
         from ..core.errors import MocapInputError
@@ -264,6 +275,13 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         settings = context.scene.mocap_autolabel
         if self.use_as_panel_layout and request.layout_ref in {name for name, *_ in _layouts(None, context)}:
             settings.layout, settings.layout_file = request.layout_ref, ""
+        if request.picked:
+            from ..blender.properties import set_layout
+
+            set_layout(settings, request.picked["to"])  # the panel shows what the take is labeled with
+            p = request.picked
+            self.report({"INFO"}, f"Layout set to {p['to']}: the take fits it better ({100 * p['better_share']:.0f} % "
+                                  f"of labeled samples confident, against {100 * p['share']:.0f} % with {p['from']})")
         s = summary(labeling, context.scene.mocap_autolabel.sure)
         if request.dropped:
             self.report({"WARNING"}, self._dropped_message(coll, request))
