@@ -16,7 +16,8 @@ venv: $(STAMP)
 
 ## demo: the bundled raw synthetic take -> labels (set + trajectory voting, C3D + report) and a review scene
 ## (labeled markers keyed by confidence + the solved hand) -> a calibrated, solved hand rig (.blend, FBX, BVH,
-## report); also the raw take alone and beside the hand that made it
+## report); also the raw take alone and beside the hand that made it; then a synthetic take of two interacting hands,
+## labeled (L_/R_ names, scored against its truth) into a review scene with both solved hands
 demo: venv
 	$(BIN)/python -m mocap_autolabel info samples/demo_take.c3d
 	$(BIN)/python -m mocap_autolabel label samples/demo_take.c3d --layout han19 -o out/demo_labeled.c3d --report out/demo_report.json --blend out/demo_review.blend --solve-hand
@@ -24,7 +25,9 @@ demo: venv
 	$(BIN)/python -m mocap_autolabel solve out/demo_labeled.c3d --layout han19 --blend out/demo_hand.blend --fbx out/demo_hand.fbx --bvh out/demo_hand.bvh --report out/demo_hand.json --save-calibration out/demo_calibration.json
 	$(BIN)/python -m mocap_autolabel import samples/demo_take.c3d --blend out/demo.blend --summary out/demo_summary.json
 	$(BIN)/python -m mocap_autolabel synth --layout han19 --frames 1200 --seed 1 -o out/demo_take.c3d --blend out/demo_truth.blend
-	@echo "demo: open out/demo_review.blend in Blender with the add-on (Mocap tab > Review: labels coloured by confidence + the solved hand), out/demo_hand.blend (solved rig), out/demo.blend (the raw take) and out/demo_truth.blend (raw take + the true hand)"
+	$(BIN)/python -m mocap_autolabel synth --hands 2 --layout han19 --frames 1200 --seed 2 -o out/demo_two_hands.c3d
+	$(BIN)/python -m mocap_autolabel label out/demo_two_hands.c3d --layout han19 -o out/demo_two_hands_labeled.c3d --blend out/demo_two_hands_review.blend --solve-hand
+	@echo "demo: open out/demo_review.blend in Blender with the add-on (Mocap tab > Review: labels coloured by confidence + the solved hand), out/demo_hand.blend (solved rig), out/demo.blend (the raw take), out/demo_truth.blend (raw take + the true hand) and out/demo_two_hands_review.blend (two hands: Left hand / Right hand labels + Hand_L / Hand_R)"
 
 ## test: ruff, then every test (real-data tests skip when ../shared/data is absent)
 test: venv lint

@@ -133,8 +133,19 @@ def _place(a: np.ndarray, b: np.ndarray, direction: np.ndarray, centres: np.ndar
            rate: float) -> np.ndarray:
     """The shift ``(F, 3)`` that puts hand ``b`` (F, M, 3) along ``direction`` from hand ``a``'s
     centre: at ``centres`` between the centres, or where the nearest markers are ``nearest`` apart
-    (bisection on the distance along the direction), eased over 0.3 s between phases."""
+    (bisection on the distance along the direction); direction and distance eased over 0.3 s
+    between phases (the hand never jumps)."""
     ca, cb = a.mean(axis=1), b.mean(axis=1)
+    ease = max(1, int(0.3 * rate))
+
+    def eased(x: np.ndarray) -> np.ndarray:  # a moving mean over 0.3 s: no jump between phases
+        padded = np.pad(x, [(ease // 2, ease - 1 - ease // 2)] + [(0, 0)] * (x.ndim - 1), mode="edge")
+        return np.stack([np.convolve(padded[:, k], np.ones(ease) / ease, mode="valid")
+                         for k in range(x.shape[1])], axis=1) if x.ndim > 1 else \
+            np.convolve(padded, np.ones(ease) / ease, mode="valid")
+
+    direction = eased(direction)
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
     lo, hi = np.zeros(len(a)), np.full(len(a), 0.6)
     close = np.isfinite(nearest)
     for _ in range(24):
@@ -144,9 +155,7 @@ def _place(a: np.ndarray, b: np.ndarray, direction: np.ndarray, centres: np.ndar
         short = gap < np.where(close, nearest, 0.0)
         lo, hi = np.where(short, mid, lo), np.where(short, hi, mid)
     distance = np.where(close, hi, centres)
-    ease = max(1, int(0.3 * rate))
-    padded = np.pad(distance, (ease // 2, ease - 1 - ease // 2), mode="edge")
-    distance = np.maximum(np.convolve(padded, np.ones(ease) / ease, mode="valid"), distance * close)
+    distance = np.maximum(eased(distance), distance * close)
     return ca + distance[:, None] * direction - cb
 
 
