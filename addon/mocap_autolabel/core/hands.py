@@ -16,9 +16,10 @@ that was seen on one hand before the hands met stays on it through the contact.
 4. A hand counts when it holds at least a third of the layout's markers in at least a tenth of
    the frames with points (ghosts and stray body markers never do).
 
-Sides: the ``set`` labeler is mirror-blind by design, so handedness is decided afterwards by the
-IK fit of a left against a right hand to each hand's labeled markers (:func:`side_evidence`),
-jointly for two hands (one left, one right).
+Sides: the ``set`` labeler is mirror-blind by design, so handedness is decided afterwards from each
+hand's labeled markers: the turn of the layout's most chiral marker tetrahedron, which a mirror
+image flips (:func:`chiral_tetrahedron`, :func:`side_evidence`), jointly for two hands (one left,
+one right).
 
 Names: a two-hand labeling names its points with a side token (:class:`HandNaming`, e.g.
 ``L_ThumbTip``); reading a labeled file back (:func:`split_hands`) understands the same
@@ -28,8 +29,9 @@ convention.
 from __future__ import annotations
 
 import functools
+import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -326,8 +328,6 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
 
 def replace_valid(take: Take, valid: np.ndarray) -> Take:
     """``take`` with the samples outside ``valid`` made missing."""
-    from dataclasses import replace
-
     return replace(take, positions=np.where(valid[..., None], take.positions, np.nan).astype(np.float32))
 
 
@@ -532,8 +532,6 @@ def split_hands(take: Take, layout: Layout, naming: HandNaming | None = None) ->
     Raises:
         MocapInputError: no hand of ``layout`` is named in the take.
     """
-    from dataclasses import replace
-
     found = hands_in_names(take.names, layout, naming)
     if not found:
         sided = [n for n in take.names if re.search("|".join(re.escape(x) for x in layout.names), n)]
@@ -553,8 +551,6 @@ def sided_path(path: str, side: str) -> str:
     side ``""``, a one-hand take)."""
     if not side:
         return path
-    import os
-
     stem, ext = os.path.splitext(path)
     return f"{stem}_{side}{ext}"
 

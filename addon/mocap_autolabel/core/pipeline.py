@@ -74,13 +74,18 @@ def _pack(take: Take, cap: int, chunk: int = 4096) -> FrameBatch:
                       widen([b.slots for b in parts], -1))
 
 
+def _take_key(take: Take) -> tuple:
+    """What identifies a take's positions for the caches below (a re-solve labels the same ones)."""
+    return take.positions.shape, take.rate, hash(take.positions.tobytes())
+
+
 #: The crossings of the last few takes: a re-solve after a reviewer's correction labels the same
 #: positions again (a tenth of a second on a 10,000-frame take).
 _CROSSINGS: dict[tuple, dict[int, list[int]]] = {}
 
 
 def _crossings(take: Take) -> dict[int, list[int]]:
-    key = (take.positions.shape, take.rate, hash(take.positions.tobytes()))
+    key = _take_key(take)
     if key not in _CROSSINGS:
         while len(_CROSSINGS) >= 4:
             _CROSSINGS.pop(next(iter(_CROSSINGS)))
@@ -94,7 +99,7 @@ _HANDS: dict[tuple, Hands] = {}
 
 def _hands(take: Take, layout: Layout, hands: str | int, ignore: np.ndarray | None) -> Hands:
     """:func:`.hands.find_hands`, remembered for the last few takes (a copy: callers change ``both``)."""
-    key = (take.positions.shape, take.rate, hash(take.positions.tobytes()), tuple(layout.names), str(hands),
+    key = (*_take_key(take), tuple(layout.names), str(hands),
            None if ignore is None else ignore.tobytes())
     if key not in _HANDS:
         while len(_HANDS) >= 4:
@@ -418,7 +423,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             1 or 2 force it. Two hands are labeled jointly: ``2M`` labels, the left hand's first,
             named with ``naming``'s side tokens; no trajectory takes labels of both hands at once.
         sides: the side of each hand found, in the order of :func:`.hands.find_hands` (hands by the
-            mean x of their centre); default: decided by the IK fit (:func:`.hands.decide_sides`).
+            mean x of their centre); default: decided by the markers' handedness
+            (:func:`.hands.side_evidence`, :func:`.hands.decide_sides`).
         naming: a :class:`.hands.HandNaming` (or its pattern) for the labels' names; two hands
             always get one (default ``L_``/``R_`` prefixes); one hand keeps plain names unless given.
         keep_named: points the file already names that are not ``layout``'s markers (a labeled
