@@ -541,7 +541,9 @@ def split_hands(take: Take, layout: Layout, naming: HandNaming | None = None) ->
     out = []
     for side, cols in found.items():
         res = None if take.residuals is None else take.residuals[:, cols]
-        out.append((side, replace(take, positions=take.positions[:, cols], names=list(layout.names), residuals=res)))
+        filled = None if take.filled is None else take.filled[:, cols]
+        out.append((side, replace(take, positions=take.positions[:, cols], names=list(layout.names), residuals=res,
+                                  filled=filled)))
     return out
 
 

@@ -724,7 +724,7 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
     from .layout import builtin_layouts, load_layout
 
     excerpt = replace(take, positions=take.positions[:CHECK_FRAMES],
-                      residuals=None if take.residuals is None else take.residuals[:CHECK_FRAMES])
+                      residuals=None if take.residuals is None else take.residuals[:CHECK_FRAMES], filled=None)
     shares = {}
     for name in builtin_layouts():
         if name != layout.name and os.path.isfile(shipped_model("set", name)):

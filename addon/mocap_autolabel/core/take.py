@@ -35,6 +35,8 @@ class Take:
         source: path of the file the take came from ("" if built in memory).
         vendor: capture system or writer of the file, as far as the file says.
         warnings: things a user should know that did not stop the read.
+        filled: bool ``(frames, points)`` or None: samples computed by a gap fill, not measured
+            (:mod:`.fill`; a C3D marks them with residual 0 and no camera bits). None: not known.
     """
 
     positions: np.ndarray
@@ -46,6 +48,7 @@ class Take:
     source: str = ""
     vendor: str = "unknown"
     warnings: list[str] = field(default_factory=list)
+    filled: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = self.positions
@@ -55,6 +58,8 @@ class Take:
             raise ValueError(f"{len(self.names)} names for {p.shape[1]} points")
         if self.residuals is not None and self.residuals.shape != p.shape[:2]:
             raise ValueError(f"residuals {self.residuals.shape} do not match positions {p.shape}")
+        if self.filled is not None and self.filled.shape != p.shape[:2]:
+            raise ValueError(f"filled {self.filled.shape} does not match positions {p.shape}")
         if not (self.rate > 0 and np.isfinite(self.rate)):
             raise ValueError(f"rate must be a positive number of frames per second, got {self.rate}")
 

@@ -82,7 +82,7 @@ def read_c3d(path: str | os.PathLike) -> Take:
         fh.seek(0)
         reader, fixes = _parse_metadata(path, fh.read(param_start + n_param_blocks * BLOCK))
         layout = _layout(path, reader, size)
-        positions, residuals = _read_samples(fh, layout)
+        positions, residuals, computed = _read_samples(fh, layout)
 
     units = _string_param(reader, "POINT:UNITS")
     take_warnings = [f"repaired parameter section: {fix}" for fix in fixes]
@@ -100,6 +100,10 @@ def read_c3d(path: str | os.PathLike) -> Take:
     if dupes:
         take_warnings.append(f"duplicate point names: {', '.join(dupes[:5])}" + (" ..." if len(dupes) > 5 else ""))
 
+    # A zero 4th word (residual 0, no camera) marks a computed sample (a gap fill), but only in a
+    # file that states residuals at all: one whose every word is 0 says nothing either way.
+    valid = ~np.isnan(positions[..., 0])
+    filled = computed & valid if (valid & ~computed).any() else None
     rate = _point_rate(reader)
     if not rate > 0:
         raise MocapInputError(path, "no usable frame rate (POINT:RATE and the header rate are 0)")
@@ -113,6 +117,7 @@ def read_c3d(path: str | os.PathLike) -> Take:
         source=path,
         vendor=_vendor(reader, layout),
         warnings=take_warnings,
+        filled=filled,
     )
 
 
@@ -329,13 +334,15 @@ def _trial_frames(reader) -> int:
     return ends[1] - ends[0] + 1 if ends[1] >= ends[0] else 0
 
 
-def _read_samples(fh, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
-    """Positions ``(frames, points, 3)`` and residuals ``(frames, points)``, float32, source units."""
+def _read_samples(fh, layout: _Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions ``(frames, points, 3)`` and residuals ``(frames, points)``, float32, source units, and
+    bool ``(frames, points)``: samples whose 4th word is 0 (residual 0, no camera: computed)."""
     n_f, n_p = layout.n_frames, layout.n_points
     positions = np.empty((n_f, n_p, 3), dtype=np.float32)
     residuals = np.empty((n_f, n_p), dtype=np.float32)
+    computed = np.zeros((n_f, n_p), dtype=bool)
     if n_f == 0 or n_p == 0:
-        return positions, residuals
+        return positions, residuals, computed
     if layout.processor == "MIPS":
         dtype = np.dtype(">f4" if layout.is_real else ">i2")
     else:
@@ -360,15 +367,19 @@ def _read_samples(fh, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
         res = residuals[f0:f0 + nf]
         # The 4th word: negative = invalid; else low byte = residual / |scale|.
         res[...] = np.where(fourth < 0, -1.0, (fourth.astype(np.int32) & 0xFF) * layout.scale)
+        computed[f0:f0 + nf] = fourth == 0
         mark_missing(xyz, res)
-    return positions, residuals
+    return positions, residuals, computed
 
 
 def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     """Write ``take`` as a C3D file (Intel, REAL), atomically.
 
     Missing samples are written as invalid (residual -1), so that every reader sees the gap.
-    Names are written in order; unlabeled slots should be named ``*N``.
+    Names are written in order; unlabeled slots should be named ``*N``. Where ``take.filled`` is
+    given, its samples are written as computed the way C3D marks them (residual 0, no camera
+    bits: a 4th word of 0) and the measured ones with the first camera bit, so that no measured
+    sample reads as computed.
 
     Args:
         take: positions in metres.
@@ -395,8 +406,12 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     residuals = np.where(valid, 0.0, -1.0)
     if take.residuals is not None:
         residuals = np.where(valid, np.nan_to_num(take.residuals.T) * scale, -1.0)
+    cameras = np.zeros((7, n_p, n_f), dtype=bool)
+    if take.filled is not None:
+        residuals = np.where(valid & take.filled.T, 0.0, residuals)
+        cameras[0] = valid & ~take.filled.T
     c["data"]["meta_points"]["residuals"] = residuals[np.newaxis].astype(np.float64)
-    c["data"]["meta_points"]["camera_masks"] = np.zeros((7, n_p, n_f), dtype=bool)
+    c["data"]["meta_points"]["camera_masks"] = cameras
     c["header"]["points"]["first_frame"] = max(int(take.first_frame) - 1, 0)
     with atomic_output(path) as tmp:
         c.write(tmp)
