@@ -372,6 +372,20 @@ def _read_samples(fh, layout: _Layout) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return positions, residuals, computed
 
 
+def _file_values(positions: np.ndarray, scale_m: float) -> np.ndarray:
+    """The float32 values in file units whose reading (:func:`read_c3d`: float32 times ``scale_m``)
+    gives back ``positions`` (metres) exactly where one exists: a take read and written again keeps
+    every sample bit for bit (of the nearest three float32 values one reads back exactly)."""
+    p = np.asarray(positions, dtype=np.float32)
+    s = np.float32(scale_m)
+    best = (p / s).astype(np.float32)
+    with np.errstate(invalid="ignore"):
+        for step in (np.inf, -np.inf):
+            other = np.nextafter(best, np.float32(step))
+            best = np.where((best * s != p) & (other * s == p), other, best)
+    return best
+
+
 def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     """Write ``take`` as a C3D file (Intel, REAL), atomically.
 
@@ -399,7 +413,7 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     c.add_parameter("MANUFACTURER", "COMPANY", ["mocap_autolabel"])
     c.add_parameter("MANUFACTURER", "SOFTWARE", [f"mocap_autolabel {__version__}"])
     pts = np.zeros((4, n_p, n_f), dtype=np.float64)
-    pts[:3] = np.transpose(take.positions, (2, 1, 0)) * scale
+    pts[:3] = np.transpose(_file_values(take.positions, unit_scale(units, path)), (2, 1, 0))
     pts[3] = 1.0
     c["data"]["points"] = pts
     valid = take.valid.T
