@@ -45,6 +45,9 @@ class BatchSettings:
         hands: ``auto`` (find how many hands each take holds), ``1`` or ``2``.
         hand_names: how two hands' labels carry their side (see ``label --hand-names``).
         calibration: with two hands, one calibration per side may be given as ``"left.json,right.json"``.
+        fill: also fill the labeled markers' gaps in ``<name>.labeled.c3d`` (marked as computed),
+            by ``fill_method`` (``auto``, ``spline``, ``rigid``, ``hand``, ``pca``), gaps up to
+            ``max_gap`` seconds; the report's ``fill`` holds every gap.
     """
 
     layout: str = "han19"
@@ -62,6 +65,9 @@ class BatchSettings:
     force: bool = False
     hands: str = "auto"
     hand_names: str | None = None
+    fill: bool = False
+    fill_method: str = "auto"
+    max_gap: float = 1.0
     extra: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -145,6 +151,8 @@ def _finished(out_dir: str, name: str, settings: BatchSettings) -> dict | None:
     if not os.path.isfile(os.path.join(out_dir, name + ".labeled.c3d")):
         return None
     if not all(os.path.isfile(os.path.join(out_dir, f)) for f in outputs.values()):
+        return None
+    if settings.fill and "fill" not in report:  # filled now, not then
         return None
     # Every rig file asked for now was written then (one per hand for a take of two hands).
     for kind in ("blend", "fbx", "bvh"):
@@ -254,16 +262,27 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
         said.append(facts["warning"])
     if said:
         out["warning"] = "; ".join(said)
-    t = time.perf_counter()
-    target = os.path.join(out_dir, name + ".labeled.c3d")
-    write_c3d(labeled, target)
-    out["outputs"]["labeled"] = os.path.basename(target)
-    timings["write"] = round(time.perf_counter() - t, 4)
-    if settings.solve_hand or settings.needs_blender():
+    solved = None
+    if settings.solve_hand or settings.needs_blender() or settings.fill and settings.fill_method in ("auto", "hand"):
         t = time.perf_counter()
         solved = solve_hands(labeled, layout, naming, calibrations if two else
                              ({"": one_cal} if one_cal is not None else None))
         timings["solve"] = round(time.perf_counter() - t, 4)
+    written = labeled
+    if settings.fill:
+        from .core.fill import fill_gaps
+
+        t = time.perf_counter()
+        filled = fill_gaps(labeled, layout, settings.fill_method, settings.max_gap, solves=solved, naming=naming)
+        written = filled.take
+        out["fill"] = filled.report()
+        timings["fill"] = round(time.perf_counter() - t, 4)
+    t = time.perf_counter()
+    target = os.path.join(out_dir, name + ".labeled.c3d")
+    write_c3d(written, target)
+    out["outputs"]["labeled"] = os.path.basename(target)
+    timings["write"] = round(time.perf_counter() - t, 4)
+    if settings.solve_hand or settings.needs_blender():
         reports = []
         for side, one in solved:
             rep = one.report()

@@ -169,7 +169,23 @@ def build_parser() -> argparse.ArgumentParser:
     lab.add_argument("--solve-hand", action="store_true",
                      help="also fit the hand to the labels and put the keyed rig in --blend (one rig per hand, "
                           "Hand_L and Hand_R, for a take of two hands)")
+    _fill_arguments(lab, "--fill")
     _progress_flags(lab)
+
+    fil = sub.add_parser("fill", help="fill the gaps of a labeled take: from the solved hand, rigid partners, PCA or "
+                                      "splines; fills are marked as computed in the C3D")
+    fil.add_argument("file", metavar="LABELED", help="a labeled take (C3D, TRC or TSV) with the layout's marker names")
+    fil.add_argument("-o", "--output", required=True, metavar="FILLED.c3d", help="the filled take")
+    fil.add_argument("--layout", default="han19", help="built-in layout name or a layout .toml (default han19)")
+    _fill_arguments(fil)
+    fil.add_argument("--calibration", metavar="CALIB.json",
+                     help="the performer's calibration for the hand fill, one per hand as left.json,right.json "
+                          "(default: calibrated on this take)")
+    fil.add_argument("--hand-names", metavar="CONVENTION",
+                     help="how two hands' labels carry their side (default: any known convention; see label)")
+    fil.add_argument("--report", metavar="REPORT.json",
+                     help="every gap: marker, frames, method, expected error, or why it was left open")
+    _progress_flags(fil)
 
     sol = sub.add_parser("solve", help="fit the rigged hand to a labeled take: calibration, IK, Blender/FBX/BVH")
     sol.add_argument("file", metavar="FILE", help="a labeled take (C3D, TRC or TSV) with the layout's marker names")
@@ -214,6 +230,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="also write a .blend per take (solves the hand)")
     bat.add_argument("--fbx", action="store_true", default=None, help="also write an FBX per take (solves the hand)")
     bat.add_argument("--bvh", action="store_true", default=None, help="also write a BVH per take (solves the hand)")
+    bat.add_argument("--fill", action="store_true", default=None,
+                     help="also fill the labeled markers' gaps in the labeled C3D (marked as computed)")
+    bat.add_argument("--fill-method", choices=FILL_METHODS, help="fill method (default auto)")
+    bat.add_argument("--max-gap", type=float, metavar="SECONDS", help="longest gap filled (default 1 s)")
     bat.add_argument("--jobs", type=int, help="takes processed side by side (default 1)")
     bat.add_argument("--hands", choices=("auto", "1", "2"), help="hands per take: found (auto, default) or forced")
     bat.add_argument("--hand-names", metavar="CONVENTION", help="how two hands' labels carry their side "
@@ -229,6 +249,30 @@ def build_parser() -> argparse.ArgumentParser:
     trn.add_argument("--steps", type=int, help="training steps (default: the shipped recipe's)")
     trn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     return parser
+
+
+FILL_METHODS = ("auto", "spline", "rigid", "hand", "pca")
+
+
+def _fill_arguments(parser: argparse.ArgumentParser, flag: str | None = None) -> None:
+    """--method/--max-gap of ``fill``; with ``flag`` (``label --fill``) the switch and --fill-method."""
+    if flag:
+        parser.add_argument(flag, action="store_true", help="also fill the labeled markers' gaps in -o's C3D "
+                                                            "(marked as computed; see the fill command)")
+    parser.add_argument("--fill-method" if flag else "--method", dest="fill_method", default="auto",
+                        choices=FILL_METHODS,
+                        help="auto (default: per gap the method with the lowest expected error), spline, rigid, "
+                             "hand (the calibrated, solved hand) or pca")
+    parser.add_argument("--max-gap", type=float, default=1.0, metavar="SECONDS",
+                        help="gaps longer than this are left open (default 1 s)")
+
+
+def _fill_line(result) -> str:
+    """One line on a fill: gaps filled by method, and those left open."""
+    report = result.report()
+    methods = ", ".join(f"{n} {k}" for k, n in sorted(report["methods"].items()))
+    return (f"{report['filled']} of {report['gaps']} gaps filled ({methods or 'none'}; "
+            f"{report['filled_samples']} samples), {report['open']} left open")
 
 
 def _hand_arguments(parser: argparse.ArgumentParser) -> None:
@@ -307,8 +351,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "train" and not args.output.lower().endswith(".onnx"):
         print(f"mocap_autolabel train: error: -o must name a .onnx file, got {args.output!r}", file=sys.stderr)
         return EXIT_USAGE
+    if args.command in ("fill", "label", "batch") and getattr(args, "max_gap", None) is not None \
+            and not args.max_gap > 0:
+        print(f"mocap_autolabel {args.command}: error: --max-gap must be positive seconds", file=sys.stderr)
+        return EXIT_USAGE
+    if args.command == "fill" and not args.output.lower().endswith(".c3d"):
+        print(f"mocap_autolabel fill: error: -o must name a .c3d file, got {args.output!r}", file=sys.stderr)
+        return EXIT_USAGE
     command = {"info": _info, "import": _import, "synth": _synth, "label": _label, "solve": _solve,
-               "batch": _batch, "train": _train}[args.command]
+               "fill": _fill, "batch": _batch, "train": _train}[args.command]
     return command(args)
 
 
@@ -446,6 +497,9 @@ def _label(args) -> int:
         print("mocap_autolabel label: error: --blend must name a .blend file, and --solve-hand needs --blend",
               file=sys.stderr)
         return EXIT_USAGE
+    if args.fill and not args.output:
+        print("mocap_autolabel label: error: --fill needs -o OUT.c3d (the filled, labeled take)", file=sys.stderr)
+        return EXIT_USAGE
     if args.blend and _bpy_or_none("label --blend") is None:
         return EXIT_USAGE
     bar = _ProgressBar.for_args(args)
@@ -477,22 +531,32 @@ def _label(args) -> int:
         missed = [f"{side} hand: {check}" for side, check in checks if not check.found]
         if doubt:
             labeling.info["layout_doubt"] = asdict(doubt)  # in the report, and in the review scene's panel
-        if args.output:
-            from .core.formats.c3d import write_c3d
-
-            bar(f"writing {args.output}")
-            write_c3d(labeled_take(take, labeling), args.output)
         solved = None
-        if args.solve_hand:
+        if args.solve_hand or args.fill and args.fill_method in ("auto", "hand"):
             from .core.hands import HandNaming
             from .core.pipeline import solve_hands
 
             bar.stage("solving the hand" if labeling.info["hands"]["count"] == 1 else "solving both hands")
             naming = labeling.info["hands"].get("naming")
-            # One HandSolve for a plain one-hand take, else [(side, HandSolve)]: one rig per hand.
+            # [(side, HandSolve)]: one rig per hand ("" for a plain one-hand take).
             solved = solve_hands(labeled_take(take, labeling), layout, HandNaming(naming) if naming else None,
                                  **_solve_progress(bar))
-            solved = solved[0][1] if [side for side, _ in solved] == [""] else solved
+        filled = None
+        if args.fill:
+            from .core.fill import fill_gaps
+            from .core.hands import HandNaming
+
+            bar("filling gaps")
+            naming = labeling.info["hands"].get("naming")
+            filled = fill_gaps(labeled_take(take, labeling), layout, args.fill_method, args.max_gap, solves=solved,
+                               naming=HandNaming(naming) if naming else None)
+        if args.output:
+            from .core.formats.c3d import write_c3d
+
+            bar(f"writing {args.output}")
+            write_c3d(filled.take if filled else labeled_take(take, labeling), args.output)
+        if solved is not None:  # one HandSolve for a plain one-hand take, else one per hand
+            solved = (solved[0][1] if [side for side, _ in solved] == [""] else solved) if args.solve_hand else None
         if args.blend:
             from .blender.export import write_review_scene
 
@@ -538,6 +602,9 @@ def _label(args) -> int:
         print(f"  truth    {tpath}: {100 * score.accuracy:.2f} % correct, {100 * score.frame_accuracy:.2f} % of frames "
               f"all correct ({score.erroneous} erroneous, {score.false_marker} false marker, "
               f"{score.false_occlusion} false occlusion)")
+    if filled is not None:
+        report["fill"] = filled.report()
+        print(f"  filled   {_fill_line(filled)}")
     if args.output:
         print(f"  labeled  {args.output}")
     if args.blend:
@@ -668,6 +735,62 @@ def _solve(args) -> int:
     return EXIT_OK
 
 
+def _fill(args) -> int:
+    from .core.errors import MocapInputError
+    from .core.fill import fill_gaps
+    from .core.formats.c3d import write_c3d
+    from .core.hand.calibrate import Calibration
+    from .core.hands import HandNaming, split_hands
+    from .core.layout import load_layout
+    from .core.take import read_take
+
+    bar = _ProgressBar.for_args(args)
+    try:
+        layout = load_layout(args.layout)
+        bar.stage(f"reading {args.file}")
+        take = read_take(args.file)
+        naming = HandNaming(args.hand_names) if args.hand_names else None
+        sides = [side for side, _ in split_hands(take, layout, naming)]
+        calibrations = {}
+        for path in filter(None, (args.calibration or "").split(",")):
+            cal = Calibration.load(path)
+            cal.check(layout, path)
+            calibrations["" if sides == [""] else cal.side] = cal
+        if len(calibrations) > len(sides):
+            raise MocapInputError(args.calibration, f"give one calibration per hand ({len(sides)} in the take)")
+        solves = None
+        if args.fill_method in ("auto", "hand"):
+            from .core.pipeline import solve_hands
+
+            bar.stage("calibrating and solving the hand" if len(calibrations) < len(sides) else "solving the hand")
+            solves = solve_hands(take, layout, naming, calibrations, **_solve_progress(bar))
+        bar.stage("filling gaps")
+        result = fill_gaps(take, layout, args.fill_method, args.max_gap, solves=solves, naming=naming)
+        bar.stage(f"writing {args.output}")
+        write_c3d(result.take, args.output)
+    except Exception as exc:
+        bar.close()
+        return _fail(args.file, exc)
+    bar.close()
+    report = result.report()
+    print(f"{args.file}: {args.fill_method} fill on {layout.name}, max gap {args.max_gap:g} s: {_fill_line(result)} "
+          f"in {report['seconds']['fill']:.2f} s")
+    reasons: dict[str, int] = {}
+    for gap in result.gaps:
+        if not gap.filled:
+            key = gap.reason.split(" (")[0]
+            reasons[key] = reasons.get(key, 0) + 1
+    for reason, n in sorted(reasons.items()):
+        print(f"  open     {n} {'gap' if n == 1 else 'gaps'} {reason}")
+    print(f"  filled   {args.output}")
+    if args.report:
+        try:
+            _write_report(args.report, report)
+        except OSError as exc:
+            return _fail(args.file, exc)
+    return EXIT_OK
+
+
 def _write_report(path: str, report: dict) -> None:
     """``report`` as JSON at ``path``, whole or not at all (a folder or unwritable path raises OSError)."""
     from .core.atomic import atomic_output
@@ -688,12 +811,16 @@ def _batch(args) -> int:
         print(f"mocap_autolabel batch: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     for key in ("layout", "model", "method", "temporal", "validate", "confident", "solve_hand", "calibration",
-                "blend", "fbx", "bvh", "jobs", "force", "hands", "hand_names"):
+                "blend", "fbx", "bvh", "jobs", "force", "hands", "hand_names", "fill", "fill_method", "max_gap"):
         value = getattr(args, key)
         if value is not None:
             setattr(settings, key, value)
     if not 1 <= settings.jobs <= 64:
         print("mocap_autolabel batch: error: --jobs must be 1 to 64", file=sys.stderr)
+        return EXIT_USAGE
+    if settings.fill_method not in FILL_METHODS or not settings.max_gap > 0:
+        print(f"mocap_autolabel batch: error: fill_method must be one of {', '.join(FILL_METHODS)} and max_gap "
+              f"positive seconds", file=sys.stderr)
         return EXIT_USAGE
     if settings.validate and settings.temporal != "vote":
         print("mocap_autolabel batch: error: --validate needs --temporal vote", file=sys.stderr)
