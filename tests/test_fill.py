@@ -112,7 +112,10 @@ def test_open_gaps_are_reported():
     assert np.isnan(out.positions[:10, 0]).all() and np.isnan(out.positions[100:250, 2]).all()
     assert fill_markers(x, RATE, "auto", max_gap=2.0).gaps[2].method is not None
     assert {g.reason for g in fill_markers(x, RATE, "hand").gaps if g.start == 50} == {"no hand solve"}
-    assert fill_markers(x, RATE, "rigid").gaps[3].reason == "fewer than 3 rigid partners"
+    assert fill_markers(x, RATE, "rigid").gaps[3].reason == "no rigid partners given"
+    few = [np.array([1, 2])] * 5
+    assert fill_markers(x, RATE, "rigid", partners=few).gaps[3].reason == "fewer than 3 rigid partners"
+    assert fill_markers(x, RATE, "auto", partners=few).gaps[3].method == "spline"
     with pytest.raises(ValueError, match="method"):
         fill_markers(x, RATE, "woltring")
 

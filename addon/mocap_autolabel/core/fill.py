@@ -174,82 +174,152 @@ def _kabsch(model: np.ndarray, observed: np.ndarray, weights: np.ndarray) -> tup
     ``(F, 3, 3)`` and translations ``(F, 3)`` with ``observed ~ R model + t`` (weights ``(F, K)``)."""
     w = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-12)
     obs = np.where(weights[..., None] > 0, observed, 0.0)
-    mc = w @ model
-    oc = np.einsum("fk,fki->fi", w, obs)
-    cov = np.einsum("fk,fki,fkj->fij", w, obs - oc[:, None], model[None] - mc[:, None])
+    mc = w @ model  # (F, 3)
+    oc = (w[:, None, :] @ obs)[:, 0]
+    cov = ((obs - oc[:, None]) * w[..., None]).transpose(0, 2, 1) @ (model[None] - mc[:, None])
     u, _, vt = np.linalg.svd(cov)
     d = np.sign(np.linalg.det(u @ vt))
     u[:, :, 2] *= d[:, None]
     rot = u @ vt
-    return rot, oc - np.einsum("fij,fj->fi", rot, mc)
+    return rot, oc - (rot @ mc[..., None])[..., 0]
 
 
-def rigid_model(markers: np.ndarray, m: int, partners: np.ndarray, frames: np.ndarray,
-                reference: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """Marker ``m`` carried rigidly by ``partners`` over ``frames``: ``(len(frames), 3)`` metres (NaN
-    where fewer than :data:`MIN_PARTNERS` are seen), and the RMS error of that model in the
-    ``reference`` frames (those where ``m`` and every partner are seen), or None when there are
-    no such frames.
+class _Model:
+    """A way to predict marker ``m`` in given frames (NaN where it cannot).
 
-    Args:
-        markers: ``(F, M, 3)`` metres, NaN where missing.
-        partners: int ``(K,)`` columns of the partners (K >= :data:`MIN_PARTNERS`).
-        frames, reference: int frame indices.
+    ``in_sample``: the model saw the marker's own samples (a hand solve), so it fits them better
+    than it predicts a gap.
     """
-    if len(reference) == 0 or len(partners) < MIN_PARTNERS:
-        return None
-    shape = markers[reference[0], partners]
-    ones = np.ones((len(reference), len(partners)))
-    rot, t = _kabsch(shape, markers[reference][:, partners], ones)
-    local = np.einsum("fji,fj->fi", rot, markers[reference, m] - t)  # R^T (x - t)
-    template = local.mean(axis=0)
-    refit = np.einsum("fij,j->fi", rot, template) + t
-    rms = float(np.sqrt(np.mean(np.sum((refit - markers[reference, m]) ** 2, axis=1))))
-    seen = np.isfinite(markers[frames][:, partners, 0])
-    rot, t = _kabsch(shape, np.nan_to_num(markers[frames][:, partners]), seen.astype(float))
-    out = np.einsum("fij,j->fi", rot, template) + t
-    out[seen.sum(axis=1) < MIN_PARTNERS] = np.nan
-    return out, rms
+
+    in_sample = False
+
+    def available(self, m: int) -> np.ndarray:
+        """bool ``(F,)``: frames where the model can predict marker ``m`` (kept per marker)."""
+        known = self.__dict__.setdefault("_known", {})
+        if m not in known:
+            known[m] = self._available(m)
+        return known[m]
+
+    def _available(self, m: int) -> np.ndarray:
+        raise NotImplementedError
+
+    def predict(self, m: int, frames: np.ndarray, start: int, stop: int) -> np.ndarray:
+        """``(len(frames), 3)`` metres: marker ``m`` in ``frames``, for the gap ``[start, stop)``."""
+        raise NotImplementedError
 
 
-class PCAModel:
+class HandFill(_Model):
+    """The solved hand's markers ``(F, M, 3)`` (NaN where the frame is unsolved)."""
+
+    in_sample = True
+
+    def __init__(self, solved: np.ndarray) -> None:
+        self.solved = np.asarray(solved, dtype=float)
+
+    def _available(self, m: int) -> np.ndarray:
+        return np.isfinite(self.solved[:, m, 0])
+
+    def predict(self, m: int, frames: np.ndarray, start: int, stop: int) -> np.ndarray:
+        return self.solved[frames, m]
+
+
+class RigidFill(_Model):
+    """The pattern / rigid-body fill: marker ``m`` carried by the Kabsch fit of its ``partners``.
+
+    Its place in the partners' frame is the mean over the frames near the gap (within
+    :data:`NEAR` seconds, or the gap's length) where it and every partner are seen; where there
+    are fewer than :data:`MIN_REFERENCE` of them, over the nearest such frames of the take.
+    """
+
+    def __init__(self, markers: np.ndarray, partners: list[np.ndarray], rate: float) -> None:
+        self.x, self.partners, self.rate = markers, partners, rate
+        self.valid = np.isfinite(markers[..., 0])
+
+    def _available(self, m: int) -> np.ndarray:
+        if len(self.partners[m]) < MIN_PARTNERS:
+            return np.zeros(len(self.x), dtype=bool)
+        return self.valid[:, self.partners[m]].sum(axis=1) >= MIN_PARTNERS
+
+    def predict(self, m: int, frames: np.ndarray, start: int, stop: int) -> np.ndarray:
+        out = np.full((len(frames), 3), np.nan)
+        p = self.partners[m]
+        every = np.flatnonzero(self.valid[:, m] & self.valid[:, p].all(axis=1))
+        if not len(every):
+            return out
+        span = max(int(NEAR * self.rate), 2 * (stop - start))
+        distance = np.maximum(start - 1 - every, every - stop)
+        ref = every[distance <= span]
+        if len(ref) < MIN_REFERENCE:
+            ref = every[np.argsort(distance, kind="stable")[:2 * span]]
+        if len(ref) > MAX_REFERENCE:
+            ref = ref[np.linspace(0, len(ref) - 1, MAX_REFERENCE).round().astype(int)]
+        shape = self.x[ref[0], p]
+        rot, t = _kabsch(shape, self.x[ref][:, p], np.ones((len(ref), len(p))))
+        template = np.einsum("fji,fj->fi", rot, self.x[ref, m] - t).mean(axis=0)  # R^T (x - t)
+        seen = self.valid[frames][:, p]
+        rot, t = _kabsch(shape, np.nan_to_num(self.x[frames][:, p]), seen.astype(float))
+        out = np.einsum("fij,j->fi", rot, template) + t
+        out[seen.sum(axis=1) < MIN_PARTNERS] = np.nan
+        return out
+
+
+class PCAFill(_Model):
     """Gløersen & Federolf's PCA reconstruction over one hand's markers ``(F, M, 3)`` (metres).
 
     The components are those of the frames where every marker is seen (centred; enough of them to
-    hold :data:`PCA_ENERGY` of the variance). :meth:`predict` gives a marker in every frame from
-    the other markers seen there: the frame is fitted to the components on their coordinates by
-    least squares (one solve per pattern of seen markers), and the marker read off the fit.
+    hold :data:`PCA_ENERGY` of the variance). A frame is fitted to them on the coordinates of the
+    other markers seen there by least squares (one solve per pattern of seen markers), and marker
+    ``m`` read off the fit.
     """
 
     def __init__(self, markers: np.ndarray, energy: float = PCA_ENERGY) -> None:
         f, m, _ = markers.shape
         self.x = markers.reshape(f, 3 * m)
         self.seen = np.isfinite(self.x)
+        self.markers_seen = self.seen[:, 0::3]
         complete = self.seen.all(axis=1)
         self.ok = complete.sum() >= 2
         if self.ok:
             self.mean = self.x[complete].mean(axis=0)
             _, s, vt = np.linalg.svd(self.x[complete] - self.mean, full_matrices=False)
             share = np.cumsum(s ** 2) / max(float(np.sum(s ** 2)), 1e-30)
-            self.k = int(np.searchsorted(share, energy) + 1)
-            self.basis = vt[:self.k].T  # (3M, k)
+            k = int(np.searchsorted(share, energy) + 1)
+            self.basis = vt[:k].T  # (3M, k)
 
-    def predict(self, m: int) -> np.ndarray:
-        """``(F, 3)`` metres: marker ``m`` from the others, NaN where none is seen (or no frame is complete)."""
-        out = np.full((len(self.x), 3), np.nan)
+    def _available(self, m: int) -> np.ndarray:
         if not self.ok:
+            return np.zeros(len(self.x), dtype=bool)
+        return (self.markers_seen.sum(axis=1) - self.markers_seen[:, m]) * 3 > self.basis.shape[1]
+
+    def predict(self, m: int, frames: np.ndarray, start: int, stop: int) -> np.ndarray:
+        out = np.full((len(frames), 3), np.nan)
+        if not self.ok or not len(frames):
             return out
-        cols = np.arange(3 * m, 3 * m + 3)
-        seen = self.seen.copy()
-        seen[:, cols] = False
-        rows_any = np.flatnonzero(seen.any(axis=1))
-        patterns, which = np.unique(seen[rows_any], axis=0, return_inverse=True)
-        for p, pattern in enumerate(patterns):
-            rows = rows_any[which.ravel() == p]
-            basis = self.basis[:, :max(1, min(self.k, int(pattern.sum()) - 1))]
-            coef, *_ = np.linalg.lstsq(basis[pattern], (self.x[rows][:, pattern] - self.mean[pattern]).T, rcond=None)
-            out[rows] = (basis[cols] @ coef).T + self.mean[cols]
+        seen = self.markers_seen[frames].copy()
+        seen[:, m] = False
+        keys, which = np.unique(seen @ (1 << np.arange(seen.shape[1], dtype=np.int64)), return_inverse=True)
+        maps = np.stack([self._map(m, int(key)) for key in keys])  # (U, 3, 3M)
+        centred = np.nan_to_num(self.x[frames] - self.mean)
+        out = np.einsum("fij,fj->fi", maps[which.ravel()], centred) + self.mean[3 * m:3 * m + 3]
+        out[~np.isfinite(maps[which.ravel(), 0, 0])] = np.nan
         return out
+
+    def _map(self, m: int, key: int) -> np.ndarray:
+        """``(3, 3M)``: marker ``m`` (centred) from the centred coordinates of the markers in the
+        bit mask ``key`` (zero columns for the others); NaN when they are too few (kept per pair)."""
+        maps = self.__dict__.setdefault("_maps", {})
+        if (m, key) not in maps:
+            n_m = self.markers_seen.shape[1]
+            use = np.repeat((key >> np.arange(n_m)) & 1 == 1, 3)
+            k = self.basis.shape[1]
+            out = np.zeros((3, 3 * n_m))
+            if use.sum() <= k:
+                out[:] = np.nan
+            else:
+                b = self.basis[use]
+                out[:, use] = self.basis[3 * m:3 * m + 3] @ np.linalg.solve(b.T @ b + 1e-12 * np.eye(k), b.T)
+            maps[m, key] = out
+        return maps[m, key]
 
 
 # --- meeting the observed samples, and the error estimates -----------------------------------------
@@ -262,38 +332,57 @@ def _slope(frames: np.ndarray, values: np.ndarray) -> np.ndarray:
     return (t @ (values - values.mean(axis=0))) / float(t @ t)
 
 
-def _end_correction(offset: np.ndarray, valid: np.ndarray, start: int, stop: int, rate: float) -> np.ndarray:
-    """The correction ``(stop - start, 3)`` that makes a model meet a marker at both ends of the gap.
+def _fade(tau: np.ndarray, width: float) -> np.ndarray:
+    """``g(tau)``: g(0) = 0, g'(0) = 1, g = g' = 0 from ``width`` on (a cubic); at most 4/27 width."""
+    tau = np.minimum(tau, width)
+    return (tau * (1 - tau / width) ** 2)[:, None]
 
-    ``offset (F, 3)`` is the observed marker minus the model (NaN where either is missing). The
-    offsets at the last sample before the gap and the first after are blended with a smoothstep
-    (position, no velocity added); each end's velocity offset (a line fitted to the offsets of up
-    to :data:`SLOPE_SAMPLES` samples) is added by a cubic that fades out within
-    :data:`VELOCITY_BLEND` seconds. So the fill's position and velocity both meet the marker's.
+
+def _extrapolate(inner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A model one frame beyond each end of ``inner (n, 3)``, carried from inside (a parabola through
+    the first and last three frames, a line through two, a constant for one)."""
+    if len(inner) >= 3:
+        return 3 * inner[0] - 3 * inner[1] + inner[2], 3 * inner[-1] - 3 * inner[-2] + inner[-3]
+    if len(inner) == 2:
+        return 2 * inner[0] - inner[1], 2 * inner[1] - inner[0]
+    return inner[0], inner[0]
+
+
+def _end_correction(x: np.ndarray, inner: np.ndarray, ends: tuple[np.ndarray, np.ndarray], before: np.ndarray,
+                    after: np.ndarray, valid: np.ndarray, start: int, stop: int,
+                    rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The correction ``(n, 3)`` that makes a model's ``inner (n, 3)`` fill of the gap ``[start,
+    stop)`` of marker ``x (F, 3)`` meet it in position and velocity at both ends; and the model's
+    offsets from the marker at the two ends ``(3,)`` each.
+
+    ``ends``: the model at the last frame before the gap and the first after it; ``before``,
+    ``after``: the model in the :data:`SLOPE_SAMPLES` frames before and after the gap
+    ``(SLOPE_SAMPLES, 3)`` (NaN where it has none). The offsets from the marker at the two ends are
+    blended with a smoothstep (no velocity added); each end's velocity offset (a line through up
+    to :data:`SLOPE_SAMPLES` offsets) is added by :func:`_fade` within :data:`VELOCITY_BLEND`
+    seconds.
     """
+    n, k = stop - start, SLOPE_SAMPLES
     a, b = start - 1, stop
-    n = b - a
-    t = np.arange(start, stop)
-    u = (t - a) / n
-    smooth = (3 * u ** 2 - 2 * u ** 3)[:, None]
-    out = offset[a] * (1 - smooth) + offset[b] * smooth
-    width = min(float(n), max(2.0, VELOCITY_BLEND * rate))
-    ka = _run_before(valid, start, SLOPE_SAMPLES)
-    kb = _run_after(valid, stop, SLOPE_SAMPLES)
+    da, db = x[a] - ends[0], x[b] - ends[1]
+    ka, kb = _run_before(valid, start, k), _run_after(valid, stop, k)
     fa, fb = np.arange(start - ka, start), np.arange(stop, stop + kb)
-    good_a, good_b = np.isfinite(offset[fa, 0]), np.isfinite(offset[fb, 0])
-    slope_a = _slope(fa[good_a], offset[fa[good_a]])
-    slope_b = _slope(fb[good_b], offset[fb[good_b]])
-
-    def fade(tau: np.ndarray) -> np.ndarray:  # g(0) = 0, g'(0) = 1, g = g' = 0 from width on
-        tau = np.minimum(tau, width)
-        return (tau * (1 - tau / width) ** 2)[:, None]
-
-    return out + slope_a * fade(t - a) - slope_b * fade(b - t)
+    off_a, off_b = x[fa] - before[k - ka:], x[fb] - after[:kb]
+    good_a, good_b = np.isfinite(off_a[:, 0]), np.isfinite(off_b[:, 0])
+    sa, sb = _slope(fa[good_a], off_a[good_a]), _slope(fb[good_b], off_b[good_b])
+    t = np.arange(start, stop)
+    u = (t - a) / (n + 1)
+    smooth = (3 * u ** 2 - 2 * u ** 3)[:, None]
+    width = min(float(n + 1), max(2.0, VELOCITY_BLEND * rate))
+    return da * (1 - smooth) + db * smooth + sa * _fade(t - a, width) - sb * _fade(b - t, width), da, db
 
 
 #: Test windows of the take's own samples that an error estimate is measured on.
 TESTS = 8
+#: Share of the model's offsets at the gap's ends (out of sample) counted into its expected error.
+END_SHARE = 0.5
+#: Fewest frames a rigid fill's template is taken from near the gap, and the most (spread evenly).
+MIN_REFERENCE, MAX_REFERENCE = 5, 64
 
 
 def _tests(ok: np.ndarray, start: int, stop: int, pad: int, span: int) -> np.ndarray:
@@ -314,6 +403,12 @@ def _smoothstep(n: int) -> np.ndarray:
     return 3 * u ** 2 - 2 * u ** 3
 
 
+def _shape(n: int) -> np.ndarray:
+    """``(n,)``: how far into a gap of ``n`` frames each frame is, 0 at the ends to 1 in the middle."""
+    u = np.arange(1, n + 1) / (n + 1)
+    return np.sqrt(4 * u * (1 - u))
+
+
 def spline_error(x: np.ndarray, valid: np.ndarray, start: int, stop: int, rate: float) -> np.ndarray:
     """Expected error ``(stop - start,)`` metres of a spline fill, per sample: the RMS error of the
     same spline over gaps of the same length hidden in the marker's own samples near the gap; where
@@ -328,9 +423,9 @@ def spline_error(x: np.ndarray, valid: np.ndarray, start: int, stop: int, rate: 
         err = np.linalg.norm(pred - x[c[:, None] + np.arange(n)], axis=2)
         return NOISE + np.sqrt(np.mean(err ** 2, axis=0))
     h = max(1, int(round(0.05 * rate)))
-    near = _window(valid, start, stop, span)
-    near = near[(near - h >= 0) & (near + h < len(valid))]
-    near = near[valid[near - h] & valid[near + h]]
+    lo, hi = max(h, start - span), min(len(valid) - h, stop + span)
+    near = np.arange(lo, hi)
+    near = near[valid[near] & valid[near - h] & valid[near + h]]
     accel = 0.0
     if len(near):
         accel = float(np.median(np.linalg.norm(x[near + h] - 2 * x[near] + x[near - h], axis=1))) * (rate / h) ** 2
@@ -338,38 +433,48 @@ def spline_error(x: np.ndarray, valid: np.ndarray, start: int, stop: int, rate: 
     return NOISE + 0.5 * accel * (t - start + 1) * (stop - t) / rate ** 2
 
 
-def model_error(offset: np.ndarray, start: int, stop: int, rate: float, floor: float = 0.0) -> np.ndarray:
-    """Expected error ``(stop - start,)`` metres of a model fill, per sample: how far the model's
-    offset from the marker (``offset (F, 3)``, NaN where either is missing) strays from its blend
-    between the ends, over gaps of the same length near this one (RMS); where there are none,
-    twice the offset's spread near the gap (or ``floor``) shaped by :func:`_shape`."""
+def _model_fill(model: _Model, m: int, x: np.ndarray, valid: np.ndarray, start: int, stop: int,
+                rate: float) -> tuple[np.ndarray, np.ndarray] | str:
+    """A model's fill ``(n, 3)`` of the gap and its expected error ``(n,)``, or why it has none.
+
+    The expected error per sample: how far the model's offset from the marker strays from its
+    blend between the ends over gaps of the same length hidden near this one (RMS; the model
+    predicts the marker there as in a gap), with :data:`END_SHARE` of the offsets at this gap's
+    own ends added in quadrature (shaped by :func:`_shape`): a hand solve that saw the marker
+    next to the gap fits it there better than it predicts it, and the ends are what it predicted.
+    """
     n = stop - start
+    ok = model.available(m)
+    if not ok[start:stop].all():
+        return "no model in every frame of the gap"
     span = max(int(NEAR * rate), 2 * n)
-    ok = np.isfinite(offset[:, 0])
-    c = _tests(ok, start, stop, 1, span)
+    c = _tests(valid & ok, start, stop, 1, span)
+    windows = (c[:, None] + np.arange(-1, n + 1)).ravel()
+    k = SLOPE_SAMPLES
+    around = np.clip(np.arange(start - k, stop + k), 0, len(x) - 1)
+    frames, back = np.unique(np.concatenate([around, windows]), return_inverse=True)
+    pred = model.predict(m, frames, start, stop)[back.ravel()]
+    inner = pred[k:k + n]
+    if not np.isfinite(inner).all():
+        return "no model in every frame of the gap"
+    before, after = pred[:k], pred[k + n:2 * k + n]
+    ends = (before[-1], after[0])
+    if model.in_sample or not (np.isfinite(ends[0]).all() and np.isfinite(ends[1]).all()):
+        # A hand solve saw the marker next to the gap and was pulled onto it there: its values
+        # there would hide its offset, so the model is carried there from inside the gap.
+        ends = _extrapolate(inner)
+    corr, da, db = _end_correction(x, inner, ends, before, after, valid, start, stop, rate)
+    spread = np.zeros(n)
     if len(c):
-        s = _smoothstep(n)[None, :, None]
-        blend = offset[c - 1][:, None] * (1 - s) + offset[c + n][:, None] * s
-        err = np.linalg.norm(offset[c[:, None] + np.arange(n)] - blend, axis=2)
-        return NOISE + np.sqrt(np.mean(err ** 2, axis=0))
-    near = _window(ok, start, stop, span)
-    spread = 2 * float(np.sqrt(np.mean(np.sum((offset[near] - offset[near].mean(axis=0)) ** 2, axis=1)))) \
-        if len(near) >= 2 else float("inf")
-    return NOISE + max(spread, floor) * _shape(start, stop)
-
-
-def _shape(start: int, stop: int) -> np.ndarray:
-    """``(stop - start,)``: how far into the gap each frame is, 0 at the ends to 1 in the middle."""
-    a, b = start - 1, stop
-    u = (np.arange(start, stop) - a) / (b - a)
-    return np.sqrt(4 * u * (1 - u))
-
-
-def _window(valid: np.ndarray, start: int, stop: int, span: int) -> np.ndarray:
-    """Observed frames within ``span`` frames of the gap ``[start, stop)``."""
-    lo, hi = max(0, start - span), min(len(valid), stop + span)
-    idx = np.arange(lo, hi)
-    return idx[valid[idx]]
+        offset = (x[windows] - pred[2 * k + n:]).reshape(len(c), n + 2, 3)
+        good = np.isfinite(offset).all(axis=(1, 2))
+        if good.any():
+            s = _smoothstep(n)[None, :, None]
+            off = offset[good]
+            err = np.linalg.norm(off[:, 1:-1] - (off[:, :1] * (1 - s) + off[:, -1:] * s), axis=2)
+            spread = np.sqrt(np.mean(err ** 2, axis=0))
+    missed = END_SHARE * 0.5 * (np.linalg.norm(da) + np.linalg.norm(db)) * _shape(n)
+    return inner + corr, NOISE + np.sqrt(spread ** 2 + missed ** 2)
 
 
 # --- the fill ---------------------------------------------------------------------------------------
@@ -402,55 +507,40 @@ def fill_markers(markers: np.ndarray, rate: float, method: str = "auto", max_gap
     error = np.full((n_f, n_m), np.nan)
     longest = int(np.floor(max_gap * rate + 1e-9))
     wanted = PREFERENCE if method == "auto" else (method,)
-    pca = PCAModel(markers) if "pca" in wanted else None
-    all_frames = np.arange(n_f)
-    models: dict[tuple[str, int], tuple[np.ndarray, float] | None] = {}
+    models: dict[str, _Model | str] = {
+        "hand": HandFill(solved) if solved is not None else "no hand solve",
+        "rigid": RigidFill(markers, partners, rate) if partners is not None else "no rigid partners given",
+    }
     gaps = []
     for m, start, stop in find_gaps(valid):
         gap = Gap(m, names[m], start, stop)
         gaps.append(gap)
         if start == 0 or stop == n_f:
-            gap.reason = "at the start of the take" if start == 0 else "at the end of the take"
-            if start == 0 and stop == n_f:
-                gap.reason = "never seen"
+            gap.reason = ("never seen" if start == 0 and stop == n_f else
+                          "at the start of the take" if start == 0 else "at the end of the take")
             continue
         if stop - start > longest:
             gap.reason = f"longer than max_gap ({(stop - start) / rate:.2f} s > {max_gap:g} s)"
             continue
         x = markers[:, m]
-        span = np.arange(start - 1, stop + 1)
-        best = None
-        why = []
+        best, why = None, []
         for name in wanted:
             if name == "spline":
-                fill, err = spline_fill(x, valid[:, m], start, stop), spline_error(x, valid[:, m], start, stop, rate)
+                got = spline_fill(x, valid[:, m], start, stop), spline_error(x, valid[:, m], start, stop, rate)
             else:
-                if name == "hand" and solved is None:
-                    why.append("no hand solve")
-                    continue
-                if name == "rigid" and (partners is None or len(partners[m]) < MIN_PARTNERS):
-                    why.append("fewer than 3 rigid partners")
-                    continue
-                if (name, m) not in models:
-                    if name == "hand":
-                        models[name, m] = solved[:, m], 0.0
-                    elif name == "pca":
-                        models[name, m] = pca.predict(m), 0.0
-                    else:
-                        ref = np.flatnonzero(valid[:, m] & valid[:, partners[m]].all(axis=1))
-                        models[name, m] = rigid_model(markers, m, partners[m], all_frames, ref)
-                if models[name, m] is None:
-                    why.append("the rigid partners are never seen with it")
-                    continue
-                model, floor = models[name, m]
-                if not np.isfinite(model[span, 0]).all():
-                    why.append(f"no {name} model in every frame of the gap")
-                    continue
-                offset = x - model
-                fill = model[start:stop] + _end_correction(offset, valid[:, m], start, stop, rate)
-                err = model_error(offset, start, stop, rate, floor)
-            if best is None or err.mean() < best[2].mean():
-                best = (name, fill, err)
+                if name == "pca" and name not in models:
+                    models[name] = PCAFill(markers)
+                model = models[name]
+                if isinstance(model, str):
+                    got = model
+                elif name == "rigid" and len(partners[m]) < MIN_PARTNERS:
+                    got = f"fewer than {MIN_PARTNERS} rigid partners"
+                else:
+                    got = _model_fill(model, m, x, valid[:, m], start, stop, rate)
+            if isinstance(got, str):
+                why.append(f"{name}: {got}" if method == "auto" else got)
+            elif best is None or got[1].mean() < best[2].mean():
+                best = (name, *got)
         if best is None:
             gap.reason = "; ".join(dict.fromkeys(why))
             continue

@@ -1,0 +1,280 @@
+"""Gap filling: hide real samples of labeled markers and compare each method's fill with them.
+
+(a) The real Qualisys glove recording (glove13, 100 Hz, 3,000 frames, real occlusions besides).
+(b) han2018_dense19 sequences (han19, 120 Hz) of at least 480 frames (4 s; Users 1-2, both hands).
+
+Per take the hand is calibrated once on the take's own labels (:func:`core.hand.calibrate`, the
+whole take as labeled); then in each round one gap per marker is hidden, of a length drawn
+log-uniformly from 0.05 to 2 s at a random place where the marker is seen for the gap and
+:data:`MARGIN` frames each side, and the take with those gaps is solved again with that
+calibration (so the solve never sees a hidden sample) and filled by every method (``max_gap``
+2 s). Errors are the distances from the fill to the hidden samples, pooled per gap-length band;
+the jump at a gap's end is how much the step from the last sample before it to the fill (and from
+the fill to the first sample after it) exceeds the marker's own step there.
+
+(c) Speed: a 10,000-frame labeled han19 take (synthetic motion of the average hand, 0.5 mm noise,
+one gap per marker every 500 frames), given its hand solve: ``fill_gaps`` with ``auto``.
+
+Writes ``benchmarks/reports/gap_fill.md`` and ``gap_fill.png``.
+
+    python benchmarks/gap_fill.py [--rounds N] [--han-rounds N] [--han-limit N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from datasets import GLOVE13, HAN2018, layout_columns, write_report  # noqa: E402
+from mocap_autolabel.core.fill import METHODS, fill_gaps, fill_markers, layout_partners  # noqa: E402
+from mocap_autolabel.core.hand import HandModel  # noqa: E402
+from mocap_autolabel.core.hand.calibrate import calibrate  # noqa: E402
+from mocap_autolabel.core.hand.ik import HandSolver  # noqa: E402
+from mocap_autolabel.core.labeling import layout_markers  # noqa: E402
+from mocap_autolabel.core.layout import load_layout  # noqa: E402
+from mocap_autolabel.core.pipeline import HandSolve  # noqa: E402
+from mocap_autolabel.core.synth.generate import marker_motion  # noqa: E402
+from mocap_autolabel.core.take import Take, read_take  # noqa: E402
+
+REPORTS = Path(__file__).parent / "reports"
+#: Gap-length bands, seconds.
+BANDS = ((0.05, 0.1), (0.1, 0.25), (0.25, 0.5), (0.5, 1.0), (1.0, 2.0))
+SHORTEST, LONGEST = 0.05, 2.0
+#: Frames seen each side of a hidden gap (the spline's support and one more).
+MARGIN = 5
+ORDER = ("spline", "rigid", "pca", "hand", "auto")
+
+
+def hide_gaps(valid: np.ndarray, rate: float, rng: np.random.Generator) -> list[tuple[int, int, int]]:
+    """One gap ``(marker, start, stop)`` per marker where it is seen for the gap and MARGIN frames each side."""
+    n_f, n_m = valid.shape
+    cs = np.concatenate([np.zeros((1, n_m), dtype=np.int64), np.cumsum(valid, axis=0)])
+    out = []
+    for m in range(n_m):
+        for _ in range(100):
+            n = max(1, int(round(np.exp(rng.uniform(np.log(SHORTEST), np.log(LONGEST))) * rate)))
+            if n + 2 * MARGIN >= n_f:
+                continue
+            start = int(rng.integers(MARGIN, n_f - n - MARGIN))
+            if cs[start + n + MARGIN, m] - cs[start - MARGIN, m] == n + 2 * MARGIN:
+                out.append((m, start, start + n))
+                break
+    return out
+
+
+def evaluate(name: str, observed: np.ndarray, rate: float, layout, rounds: int, seed: int, rows: list) -> None:
+    """Calibrate on ``observed (F, M, 3)``, then ``rounds`` rounds of hidden gaps, every method."""
+    t = time.perf_counter()
+    cal = calibrate(observed, layout)
+    print(f"{name}: calibrated in {time.perf_counter() - t:.1f} s", flush=True)
+    solver = cal.solver(layout)
+    partners = layout_partners(layout)
+    rng = np.random.default_rng(seed)
+    valid = np.isfinite(observed[..., 0])
+    for r in range(rounds):
+        gaps = hide_gaps(valid, rate, rng)
+        hidden = observed.copy()
+        for m, a, b in gaps:
+            hidden[a:b, m] = np.nan
+        solved = solver.solve(hidden, rate=rate).markers
+        for method in ORDER:
+            t = time.perf_counter()
+            out = fill_markers(hidden, rate, method, LONGEST, solved=solved, partners=partners)
+            seconds = time.perf_counter() - t
+            used = {(g.marker, g.start): g.method for g in out.gaps}
+            for m, a, b in gaps:
+                x, truth = out.positions[:, m], observed[:, m]
+                if not np.isfinite(x[a:b, 0]).all():
+                    rows.append(dict(take=name, method=method, seconds=(b - a) / rate, used=None, err=None,
+                                     jump=None, est=None))
+                    continue
+                err = np.linalg.norm(x[a:b] - truth[a:b], axis=1)
+                jump = max(np.linalg.norm(x[a] - x[a - 1]) - np.linalg.norm(truth[a] - truth[a - 1]),
+                           np.linalg.norm(x[b] - x[b - 1]) - np.linalg.norm(truth[b] - truth[b - 1]))
+                rows.append(dict(take=name, method=method, seconds=(b - a) / rate, used=used.get((m, a)), err=err,
+                                 jump=jump, est=out.error[a:b, m], fill_s=seconds))
+        print(f"  round {r + 1}/{rounds}: {len(gaps)} gaps", flush=True)
+
+
+def han_sequences(layout, min_frames: int = 480) -> list[tuple[str, np.ndarray]]:
+    out = []
+    for path in sorted(glob.glob(os.path.join(HAN2018, "User*", "capture*", "*.trc"))):
+        take = read_take(path)
+        if take.n_frames >= min_frames:
+            cols = layout_columns(take.names, layout)
+            name = f"{path.split(os.sep)[-3]}/{os.path.basename(path).replace('_training_dense', '')[:-4]}"
+            out.append((name, take.positions[:, cols].astype(np.float64)))
+    return out
+
+
+def band_table(rows: list, title: str) -> tuple[list[str], dict]:
+    """Median / p95 error (mm) per method and band; also the pooled figures the bars use."""
+    lines = [f"### {title}", "", "Median / 95th percentile error (mm) of the filled samples; `n` = gaps (of which "
+             "filled by that method: a gap a method cannot fill counts as unfilled, not as an error).", "",
+             "| method | " + " | ".join(f"{a:g}-{b:g} s" for a, b in BANDS) + " | largest jump mm |",
+             "|---|" + "---|" * (len(BANDS) + 1)]
+    stats: dict = {}
+    for method in ORDER:
+        cells = []
+        mine = [r for r in rows if r["method"] == method]
+        for a, b in BANDS:
+            band = [r for r in mine if a <= r["seconds"] < b or (b == LONGEST and r["seconds"] == b)]
+            done = [r for r in band if r["err"] is not None]
+            if done:
+                e = np.concatenate([r["err"] for r in done]) * 1000
+                stats[method, a] = (float(np.median(e)), float(np.percentile(e, 95)))
+                cells.append(f"{np.median(e):.2f} / {np.percentile(e, 95):.1f} (n {len(band)}, {len(done)} filled)")
+            else:
+                cells.append(f"- (n {len(band)}, 0 filled)")
+        jumps = [r["jump"] for r in mine if r["jump"] is not None]
+        stats[method, "jump"] = 1000 * max(jumps) if jumps else float("nan")
+        for key, lo, hi in (("upto0.5", 0, 0.5), ("upto2", 0, 2.0001), ("from0.25", 0.25, 2.0001)):
+            done = [r for r in mine if r["err"] is not None and lo <= r["seconds"] < hi]
+            stats[method, key] = float(np.median(np.concatenate([r["err"] for r in done]) * 1000)) if done else np.nan
+        lines.append(f"| {method} | " + " | ".join(cells) + f" | {stats[method, 'jump']:.3f} |")
+    picks = {}
+    for r in rows:
+        if r["method"] == "auto" and r["used"]:
+            picks[r["used"]] = picks.get(r["used"], 0) + 1
+    lines += ["", "auto chose: " + ", ".join(f"{k} {v}" for k, v in sorted(picks.items())), ""]
+    est = [(np.mean(r["est"]), np.mean(r["err"])) for r in rows if r["method"] == "auto" and r["err"] is not None]
+    if est:
+        e = np.array(est)
+        ratio = e[:, 1] / e[:, 0]
+        lines += [f"Expected error of auto's fills against the error measured, per gap: median ratio measured / "
+                  f"expected {np.median(ratio):.2f} (10th-90th percentile {np.percentile(ratio, 10):.2f}-"
+                  f"{np.percentile(ratio, 90):.2f}); rank correlation {_spearman(e[:, 0], e[:, 1]):.2f}.", ""]
+    return lines, stats
+
+
+def _spearman(a: np.ndarray, b: np.ndarray) -> float:
+    ra, rb = np.argsort(np.argsort(a)), np.argsort(np.argsort(b))
+    return float(np.corrcoef(ra, rb)[0, 1])
+
+
+def bars(stats: dict) -> list[str]:
+    lines = ["Bars (real glove recording):", ""]
+    for method in ("hand", "auto"):
+        a, b = stats[method, "upto0.5"], stats[method, "upto2"]
+        lines.append(f"- {method}: median {a:.2f} mm for gaps up to 0.5 s (bar <= 3: {'met' if a <= 3 else 'NOT met'}), "
+                     f"{b:.2f} mm up to 2 s (bar <= 8: {'met' if b <= 8 else 'NOT met'})")
+        for other in ("spline", "pca"):
+            ratio = stats[other, "from0.25"] / stats[method, "from0.25"]
+            lines.append(f"  - gaps >= 0.25 s: {stats[method, 'from0.25']:.2f} mm against {other} "
+                         f"{stats[other, 'from0.25']:.2f} mm: {ratio:.1f}x lower (bar >= 2x: "
+                         f"{'met' if ratio >= 2 else 'NOT met'})")
+    worst = max(stats[m, "jump"] for m in ORDER)
+    lines += [f"- largest jump at a gap's end beyond the marker's own step, any method: {worst:.3f} mm "
+              f"(bar < 0.5: {'met' if worst < 0.5 else 'NOT met'})", ""]
+    return lines
+
+
+def speed(lines: list[str]) -> None:
+    layout = load_layout("han19")
+    hand = HandModel(side="right")
+    _, truth = marker_motion(layout, hand, 10_000, seed=7, noise=0.0005)
+    rng = np.random.default_rng(7)
+    x = truth.copy()
+    valid = np.ones(x.shape[:2], dtype=bool)
+    count = 0
+    for chunk in range(0, 10_000, 500):
+        for m, a, b in hide_gaps(valid[chunk:chunk + 500], 120.0, rng):
+            x[chunk + a:chunk + b, m] = np.nan
+            count += 1
+    take = Take(x.astype(np.float32), list(layout.names), 120.0)
+    t = time.perf_counter()
+    fit = HandSolver(hand, layout.place(hand)[0]).solve(x, rate=120.0)
+    solve_s = time.perf_counter() - t
+    solves = [("", HandSolve(None, fit, layout, 120.0, 1, {}))]
+    times = []
+    for _ in range(3):
+        t = time.perf_counter()
+        result = fill_gaps(take, layout, "auto", 2.0, solves=solves)
+        times.append(time.perf_counter() - t)
+    rep = result.report()
+    best = min(times)
+    lines += ["## Speed", "", f"A 10,000-frame labeled han19 take (120 Hz, {count} gaps of 0.05-2 s hidden), given "
+              f"its hand solve ({solve_s:.1f} s): `fill_gaps(..., 'auto')` filled {rep['filled']} gaps "
+              f"({rep['filled_samples']} samples) in {best:.2f} s (best of 3; {', '.join(f'{t:.2f}' for t in times)}). "
+              f"Bar: under 1 s: {'met' if best < 1 else 'NOT met'}.", ""]
+    print(*lines[-2:], sep="\n", flush=True)
+
+
+def plot(all_stats: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(all_stats), figsize=(6 * len(all_stats), 4.2), sharey=True)
+    mids = [np.sqrt(a * b) for a, b in BANDS]
+    for ax, (title, stats) in zip(np.atleast_1d(axes), all_stats.items()):
+        for method in ORDER:
+            med = [stats.get((method, a), (np.nan, np.nan))[0] for a, _ in BANDS]
+            p95 = [stats.get((method, a), (np.nan, np.nan))[1] for a, _ in BANDS]
+            line, = ax.plot(mids, med, "o-", label=f"{method} median")
+            ax.plot(mids, p95, ":", color=line.get_color(), alpha=0.7)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("gap length, s (band centre)")
+        ax.set_title(title)
+        ax.grid(True, which="both", alpha=0.3)
+    np.atleast_1d(axes)[0].set_ylabel("error, mm (solid: median, dotted: 95th percentile)")
+    np.atleast_1d(axes)[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--rounds", type=int, default=12, help="rounds of hidden gaps on the glove take")
+    parser.add_argument("--han-rounds", type=int, default=3, help="rounds per han2018 sequence")
+    parser.add_argument("--han-limit", type=int, default=12, help="han2018 sequences used (of those >= 480 frames)")
+    args = parser.parse_args()
+    lines = ["# Gap filling benchmark", "",
+             f"`python benchmarks/gap_fill.py --rounds {args.rounds} --han-rounds {args.han_rounds} --han-limit "
+             f"{args.han_limit}`; {platform.node() and 'a shared, loaded 2-core machine'}. Methods: "
+             f"{', '.join(METHODS)} (see `core/fill.py`).", "",
+             __doc__.split("\n\n", 1)[1].split("Writes")[0].strip(), ""]
+    all_stats = {}
+    if os.path.isfile(GLOVE13):
+        layout = load_layout("glove13")
+        observed = layout_markers(read_take(GLOVE13), layout)
+        rows: list = []
+        evaluate("glove13", observed, 100.0, layout, args.rounds, 1, rows)
+        table, stats = band_table(rows, f"Real glove recording (glove13, 100 Hz, {len(observed)} frames, "
+                                        f"{args.rounds} rounds)")
+        lines += ["## Real glove recording", ""] + table + bars(stats)
+        all_stats["real glove (glove13, 100 Hz)"] = stats
+    else:
+        lines += ["## Real glove recording", "", f"skipped: {GLOVE13} not available", ""]
+    if os.path.isdir(HAN2018):
+        layout = load_layout("han19")
+        seqs = han_sequences(layout)[:args.han_limit]
+        rows = []
+        for i, (name, observed) in enumerate(seqs):
+            evaluate(name, observed, 120.0, layout, args.han_rounds, 100 + i, rows)
+        table, stats = band_table(rows, f"han2018 (han19, 120 Hz): {len(seqs)} sequences of 480-500 frames, "
+                                        f"{args.han_rounds} rounds each")
+        lines += ["## han2018 sequences", ""] + table
+        all_stats["han2018 (han19, 120 Hz)"] = stats
+    else:
+        lines += ["## han2018 sequences", "", f"skipped: {HAN2018} not available", ""]
+    speed(lines)
+    if all_stats:
+        plot(all_stats, REPORTS / "gap_fill.png")
+        lines += ["![error against gap length](gap_fill.png)", ""]
+    write_report(str(REPORTS / "gap_fill.md"), lines)
+
+
+if __name__ == "__main__":
+    main()
