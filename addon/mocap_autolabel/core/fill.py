@@ -333,19 +333,45 @@ def _slope(frames: np.ndarray, values: np.ndarray) -> np.ndarray:
 
 
 def _fade(tau: np.ndarray, width: float) -> np.ndarray:
-    """``g(tau)``: g(0) = 0, g'(0) = 1, g = g' = 0 from ``width`` on (a cubic); at most 4/27 width."""
+    """``g(tau)`` for frames ``tau`` from a gap's end: g(0) = 0, g(1) = 1 (the first step into the gap
+    takes the whole velocity offset), g = g' = 0 from ``width`` on (a cubic); at most about 4/27
+    ``width``."""
     tau = np.minimum(tau, width)
-    return (tau * (1 - tau / width) ** 2)[:, None]
+    return (tau * (1 - tau / width) ** 2 / (1 - 1 / width) ** 2)[:, None]
 
 
-def _extrapolate(inner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A model one frame beyond each end of ``inner (n, 3)``, carried from inside (a parabola through
-    the first and last three frames, a line through two, a constant for one)."""
-    if len(inner) >= 3:
-        return 3 * inner[0] - 3 * inner[1] + inner[2], 3 * inner[-1] - 3 * inner[-2] + inner[-3]
-    if len(inner) == 2:
-        return 2 * inner[0] - inner[1], 2 * inner[1] - inner[0]
-    return inner[0], inner[0]
+def _settled(inner: np.ndarray, before: np.ndarray, after: np.ndarray,
+             settle: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A hand solve's fill ``inner (n, 3)`` of a gap and its values ``before``, ``after`` ``(k, 3)``
+    the gap, with each end where the solve jumps (its value next to the gap is more than
+    :data:`SETTLE_TOLERANCE` off the parabola through the gap's first three frames) carried
+    straight from inside: its first (last) ``settle`` frames replaced by the straight continuation
+    of the two frames after (before) them, and that continuation ``k`` frames beyond the end.
+
+    The solve saw the marker in the frames next to the gap and was pulled onto it there; it lets
+    go of it over the first frames of the gap (the pose track's low-pass filter, the warm start),
+    a transient that is no motion of the marker. A solve that needs no pull (an exact model) has
+    no jump and is kept as it is.
+    """
+    n, k = len(inner), len(before)
+    inner, before, after = inner.copy(), before.copy(), after.copy()
+    steps = np.arange(1, k + 1)[:, None]
+    for end in (0, 1):
+        run = inner if end == 0 else inner[::-1]
+        next_to = before[-1] if end == 0 else after[0]
+        guess = 3 * run[0] - 3 * run[1] + run[2] if n >= 3 else run[0]
+        if np.isfinite(next_to).all() and np.linalg.norm(next_to - guess) <= SETTLE_TOLERANCE:
+            continue
+        s = settle if n >= 2 * settle + 2 else 0
+        ramp = np.arange(s, 0, -1)[:, None]
+        if s:
+            run[:s] = run[s] - ramp * (run[s + 1] - run[s])
+        step = run[1] - run[0] if n >= 2 else np.zeros(3)
+        if end == 0:
+            before[:] = run[0] - steps[::-1] * step
+        else:
+            after[:] = run[0] - steps * step
+    return inner, before, after
 
 
 def _end_correction(x: np.ndarray, inner: np.ndarray, ends: tuple[np.ndarray, np.ndarray], before: np.ndarray,
@@ -373,7 +399,7 @@ def _end_correction(x: np.ndarray, inner: np.ndarray, ends: tuple[np.ndarray, np
     t = np.arange(start, stop)
     u = (t - a) / (n + 1)
     smooth = (3 * u ** 2 - 2 * u ** 3)[:, None]
-    width = min(float(n + 1), max(2.0, VELOCITY_BLEND * rate))
+    width = min(float(n + 1), max(3.0, VELOCITY_BLEND * rate))
     return da * (1 - smooth) + db * smooth + sa * _fade(t - a, width) - sb * _fade(b - t, width), da, db
 
 
@@ -381,6 +407,11 @@ def _end_correction(x: np.ndarray, inner: np.ndarray, ends: tuple[np.ndarray, np
 TESTS = 8
 #: Share of the model's offsets at the gap's ends (out of sample) counted into its expected error.
 END_SHARE = 0.5
+#: Seconds at each end of a gap over which a hand solve lets go of the marker it saw next to it
+#: (:func:`_settled`).
+SETTLE = 0.05
+#: Metres: a hand solve whose value next to a gap is this far off its course inside the gap jumps there.
+SETTLE_TOLERANCE = 0.0005
 #: Fewest frames a rigid fill's template is taken from near the gap, and the most (spread evenly).
 MIN_REFERENCE, MAX_REFERENCE = 5, 64
 
@@ -458,12 +489,9 @@ def _model_fill(model: _Model, m: int, x: np.ndarray, valid: np.ndarray, start: 
     if not np.isfinite(inner).all():
         return "no model in every frame of the gap"
     before, after = pred[:k], pred[k + n:2 * k + n]
-    ends = (before[-1], after[0])
-    if model.in_sample or not (np.isfinite(ends[0]).all() and np.isfinite(ends[1]).all()):
-        # A hand solve saw the marker next to the gap and was pulled onto it there: its values
-        # there would hide its offset, so the model is carried there from inside the gap.
-        ends = _extrapolate(inner)
-    corr, da, db = _end_correction(x, inner, ends, before, after, valid, start, stop, rate)
+    if model.in_sample or not (np.isfinite(before[-1]).all() and np.isfinite(after[0]).all()):
+        inner, before, after = _settled(inner, before, after, int(round(SETTLE * rate)) if model.in_sample else 0)
+    corr, da, db = _end_correction(x, inner, (before[-1], after[0]), before, after, valid, start, stop, rate)
     spread = np.zeros(n)
     if len(c):
         offset = (x[windows] - pred[2 * k + n:]).reshape(len(c), n + 2, 3)
