@@ -59,17 +59,28 @@ def export_labeled_c3d(take_coll: bpy.types.Collection, path: str) -> None:
 
     The file is in the take's own terms, not the scene's: positions in the file's units (the
     import's Scale taken off), frames numbered as the file numbered them (the import's Frame
-    Offset taken off), so a round trip gives the original first frame.
+    Offset taken off), so a round trip gives the original first frame. Filled samples (the
+    ``GENERATED`` keys of *Fill Gaps*) are written as computed: residual 0, no camera bits.
     """
+    import numpy as np
+
     from ..core.formats.c3d import write_c3d
     from ..core.labeling import labeled_take
     from ..core.take import UNIT_SCALE
+    from .fill import filled_keys
     from .review import current_take, load_state
     from .scene import file_frames
 
     take = file_frames(take_coll, current_take(take_coll))
     units = take.source_units if take.source_units in UNIT_SCALE else "mm"
-    write_c3d(labeled_take(take, load_state(take_coll).labeling), path, units=units)
+    labeling = load_state(take_coll).labeling
+    out = labeled_take(take, labeling)
+    idx, labels, xyz = filled_keys(take_coll, len(labeling.names))
+    if len(idx):  # the fills (Fill Gaps), written as computed samples
+        out.filled = np.zeros(out.valid.shape, dtype=bool)
+        out.positions[idx, labels] = xyz
+        out.filled[idx, labels] = True
+    write_c3d(out, path, units=units)
 
 
 def write_solved_scene(take, solved, blend: str | None = None, fbx: str | None = None,

@@ -321,6 +321,10 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
         for fc in curves:
             if fc.group is not None and fc.group.color_set != FINGER_COLOR_SETS[finger]:
                 fc.group.color_set = FINGER_COLOR_SETS[finger]
+    if todo:
+        from .fill import forget_fills
+
+        forget_fills(take_coll, todo)  # rewritten from their measured samples: their fills went
 
     # Unlabeled samples, one empty per slot that has any.
     null_class = null_classes(labeling, sure)

@@ -192,6 +192,12 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
             said.append(f"{report['solved_frames']} of {report['frames']} frames in {seconds:.1f} s: marker RMS "
                         f"{report['marker_rms_mm']:.2f} mm, {report['frames_over_gate']} frames over the "
                         f"{report['gate_mm']:g} mm gate ({arm.name})")
+        take_coll = bpy.data.collections.get(request.source)
+        if take_coll is not None and take_coll.get("mocap_fill"):  # the fills follow the new solve
+            from ..blender.fill import refill
+
+            filled = refill(take_coll, hands)
+            said.append(f"refilled {filled['filled']} gaps")
         self.report({"INFO"}, "Solved " + "; ".join(said))
         return {"FINISHED"}
 

@@ -134,6 +134,9 @@ class MOCAPAL_PT_relabel(_Sidebar, bpy.types.Panel):
         col.separator()
         col.prop(settings, "auto_resolve")
         col.operator("mocap_autolabel.resolve", icon="FILE_REFRESH")
+        col.separator()
+        col.operator("mocap_autolabel.fill_gaps", icon="KEYTYPE_GENERATED_VEC")
+        col.operator("mocap_autolabel.clear_fill", icon="X")
         col.operator("mocap_autolabel.export_labeled", icon="EXPORT")
 
 

@@ -109,6 +109,12 @@ class Calibration:
             raise MocapInputError(where, "calibration file not found") from None
         except (OSError, ValueError) as exc:
             raise MocapInputError(where, f"not a readable calibration JSON ({exc})") from None
+        return cls.from_dict(data, where)
+
+    @classmethod
+    def from_dict(cls, data: dict, where: str = "calibration") -> Calibration:
+        """A calibration from :meth:`to_dict`'s dict (a file's, or one kept with a solved rig);
+        any problem is one :class:`MocapInputError` naming ``where``."""
         try:
             if data.get("format") != FORMAT:
                 raise ValueError(f"format is {data.get('format')!r}, expected {FORMAT!r}")

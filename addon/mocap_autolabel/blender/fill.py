@@ -1,0 +1,209 @@
+"""Filled gaps in the scene: the fills of a labeled take's markers as keys of their own type.
+
+*Fill Gaps* keys each filled sample on its labeled empty with the keyframe type ``GENERATED``
+(none of the confidence colours: KEYFRAME, BREAKDOWN, EXTREME, JITTER), so the Dope Sheet shows
+fills apart from measured samples, and the marker is shown in the gap. The take collection keeps
+what was filled in ``mocap_fill`` (method, max gap, every gap); the keys are the fill itself: a
+saved .blend keeps both, and *Export Labeled C3D* writes the ``GENERATED`` keys as computed samples.
+
+A relabel or correction rewrites the markers it changes from their measured samples: their fills go
+(the record drops them) and *Fill Gaps* fills them again. A re-solve of the hand refills every
+filled gap with the new solve.
+
+The fill is the core's (:func:`core.fill.fill_gaps`); the hand comes from the take's solved rig
+(its calibration, solved again on the current labels), where there is one.
+"""
+
+from __future__ import annotations
+
+import json
+
+import bpy
+import numpy as np
+
+from ..core.errors import MocapInputError
+from ..core.fill import fill_gaps
+from ..core.labeling import labeled_take
+from ..core.review import marker_classes
+from . import animio
+from .review import (
+    current_take,
+    finger_of,
+    first_frame,
+    key_sure,
+    key_type_values,
+    labeled_object,
+    load_state,
+    state_layout,
+)
+from .scene import key_track
+
+#: The keyframe type of a filled sample.
+FILL_KEY = "GENERATED"
+
+
+def fill_record(take_coll: bpy.types.Collection) -> dict:
+    """``{"method", "max_gap", "gaps": [{"label", "start", "stop", "method", "error_mm"}]}`` (empty: none)."""
+    raw = take_coll.get("mocap_fill")
+    return json.loads(raw) if raw else {}
+
+
+def _store(take_coll: bpy.types.Collection, record: dict) -> None:
+    if record.get("gaps"):
+        take_coll["mocap_fill"] = json.dumps(record)
+    else:
+        take_coll.pop("mocap_fill", None)
+
+
+def forget_fills(take_coll: bpy.types.Collection, labels) -> None:
+    """Drop the record of the fills of ``labels`` (their keys were rewritten from measured samples)."""
+    record = fill_record(take_coll)
+    if record:
+        gone = {int(v) for v in labels}
+        record["gaps"] = [g for g in record["gaps"] if g["label"] not in gone]
+        _store(take_coll, record)
+
+
+def filled_keys(take_coll: bpy.types.Collection, n_labels: int) -> tuple[np.ndarray, np.ndarray]:
+    """The fills as the keys hold them: sample indices and labels ``(k,)`` each, and ``(k, 3)``
+    metres (the import's Scale taken off), from the ``GENERATED`` location keys of the labeled empties."""
+    scale = float(take_coll.get("mocap_scale", 1.0))
+    first = first_frame(take_coll)
+    kind = animio.key_type_value(FILL_KEY)
+    idx, labels, xyz = [], [], []
+    for label in range(n_labels):
+        obj = labeled_object(take_coll, label)
+        curves = [animio.find_fcurve(obj, "location", axis) for axis in range(3)] if obj else [None]
+        if any(c is None for c in curves):
+            continue
+        mine = animio.read_key_types(curves[0]) == kind
+        if not mine.any():
+            continue
+        frames = animio.read_keys(curves[0])[0][mine]
+        idx.append(np.rint(frames).astype(np.int64) - first)
+        labels.append(np.full(int(mine.sum()), label))
+        xyz.append(np.stack([animio.read_keys(c)[1][mine] for c in curves], axis=1) / scale)
+    if not idx:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    return np.concatenate(idx), np.concatenate(labels), np.concatenate(xyz)
+
+
+def _key_label(take_coll: bpy.types.Collection, take, layout, labeling, label: int,
+               fill: np.ndarray | None = None, positions: np.ndarray | None = None) -> None:
+    """Rewrite a labeled empty's keys: its measured samples typed by confidence, and the samples
+    where bool ``fill (F,)`` holds at ``positions (F, 3)`` metres typed :data:`FILL_KEY`."""
+    obj = labeled_object(take_coll, label)
+    if obj is None:
+        return
+    scale = float(take_coll.get("mocap_scale", 1.0))
+    classes = marker_classes(labeling, key_sure(take_coll))[:, label]
+    measured = classes >= 0
+    per = labeling.per_sample()
+    xyz = np.full((take.n_frames, 3), np.nan, dtype=np.float32)
+    f, s = np.nonzero(per == label)
+    xyz[f] = take.positions[f, s] * scale
+    types = np.where(measured, key_type_values()[np.maximum(classes, 0)], animio.key_type_value(FILL_KEY))
+    valid = measured.copy()
+    if fill is not None:
+        fill = fill & ~measured
+        xyz[fill] = positions[fill] * scale
+        valid |= fill
+    frames_all = np.arange(take.n_frames, dtype=np.float32) + first_frame(take_coll)
+    key_track(obj, frames_all, valid, xyz, types[valid], group=finger_of(layout, label % len(layout)).title(),
+              hold_type="MOVING_HOLD")
+
+
+def take_calibrations(take_coll: bpy.types.Collection) -> dict:
+    """``{side: Calibration}`` of the hands solved from the take (side ``""`` for one hand), from the
+    calibration each solved rig keeps."""
+    from ..core.hand.calibrate import Calibration
+
+    out = {}
+    for coll in bpy.data.collections:
+        source = coll.get("mocap_solved_from")
+        if source != take_coll.name and not str(source or "").startswith(take_coll.name + ":"):
+            continue
+        side = "" if source == take_coll.name else str(source).split(":")[-1]
+        for obj in coll.all_objects:
+            if "mocap_calibration" in obj:
+                out[side] = Calibration.from_dict(json.loads(obj["mocap_calibration"]), f"{obj.name}'s calibration")
+    return out
+
+
+def fill_scene(take_coll: bpy.types.Collection, method: str = "auto", max_gap: float = 1.0,
+               labels: list[int] | None = None, solves: list | None = None) -> dict:
+    """Fill the gaps of the take's labeled markers (``labels``, default all) and key the fills.
+
+    The hand (``hand``, ``auto``) is the take's solved rig, solved again on the current labels with
+    its calibration, or ``solves`` (``[(side, HandSolve)]``) where given. Returns the fill's report
+    (:meth:`core.fill.TakeFill.report`) for those labels.
+
+    Raises:
+        MocapInputError: ``hand`` was asked and the take has no solved hand.
+    """
+    from ..core.hands import HandNaming, hands_in_names
+
+    state = load_state(take_coll)
+    layout = state_layout(state)
+    labeling = state.labeling
+    take = current_take(take_coll)
+    lab_take = labeled_take(take, labeling)
+    pattern = labeling.info.get("hands", {}).get("naming")
+    naming = HandNaming(pattern) if pattern else None
+    if solves is None and method in ("hand", "auto"):
+        calibrations = take_calibrations(take_coll)
+        sides = set(hands_in_names(lab_take.names, layout, naming))
+        if sides and sides <= set(calibrations):
+            from ..core.pipeline import solve_hands
+
+            solves = solve_hands(lab_take, layout, naming, calibrations)
+        elif method == "hand":
+            raise MocapInputError(take_coll.name, "has no solved hand to fill from: Solve Hand first (or use "
+                                                  "another method)")
+    result = fill_gaps(lab_take, layout, method, max_gap, solves=solves or [], naming=naming)
+    n = len(labeling.names)
+    chosen = sorted(set(range(n) if labels is None else labels))
+    for label in chosen:
+        _key_label(take_coll, take, layout, labeling, label, result.take.filled[:, label],
+                   result.take.positions[:, label])
+    record = fill_record(take_coll)
+    keep = [g for g in record.get("gaps", []) if g["label"] not in chosen]
+    mine = [g for g in result.gaps if g.marker in chosen]
+    record = {"method": method, "max_gap": max_gap,
+              "gaps": keep + [{"label": g.marker, "start": g.start, "stop": g.stop, "method": g.method,
+                               "error_mm": round(1000 * g.error, 3)} for g in mine if g.filled]}
+    _store(take_coll, record)
+    report = result.report()
+    report["gap_list"] = [g.as_dict(take.rate, take.first_frame) for g in mine]
+    report["filled"] = sum(1 for g in mine if g.filled)
+    report["open"] = len(mine) - report["filled"]
+    report["gaps"] = len(mine)
+    report["methods"] = {}
+    for g in mine:
+        if g.filled:
+            report["methods"][g.method] = report["methods"].get(g.method, 0) + 1
+    return report
+
+
+def clear_fill(take_coll: bpy.types.Collection, labels: list[int] | None = None) -> int:
+    """Remove the fills of ``labels`` (default all): their keys again hold only measured samples.
+    Returns how many filled samples went."""
+    state = load_state(take_coll)
+    n = len(state.labeling.names)
+    idx, lab, _ = filled_keys(take_coll, n)
+    chosen = sorted(set(range(n) if labels is None else labels))
+    layout, take = state_layout(state), current_take(take_coll)
+    for label in sorted(set(lab.tolist()) & set(chosen)):
+        _key_label(take_coll, take, layout, state.labeling, label)
+    forget_fills(take_coll, chosen)
+    return int(np.isin(lab, chosen).sum()) if len(idx) else 0
+
+
+def refill(take_coll: bpy.types.Collection, solves: list | None = None) -> dict | None:
+    """Fill again every label the record holds, with its method and max gap (after a re-solve,
+    with the new ``solves``); None when the take has no fills."""
+    record = fill_record(take_coll)
+    if not record.get("gaps"):
+        return None
+    labels = sorted({g["label"] for g in record["gaps"]})
+    return fill_scene(take_coll, record["method"], float(record["max_gap"]), labels, solves)

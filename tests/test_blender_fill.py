@@ -1,0 +1,159 @@
+"""Fill Gaps and Clear Fill in the bpy module: keys of their own type, selection, undo, a relabel,
+a saved file and the exported C3D."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import import_take as _import
+from helpers import review_state as state
+from helpers import select as _select
+from mocap_autolabel.core.formats.c3d import read_c3d, write_c3d
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.review import KEY_TYPES
+from mocap_autolabel.core.synth.generate import synthesize
+
+
+@pytest.fixture(scope="module")
+def take_file(tmp_path_factory):
+    """A synthetic han19 take whose labels have gaps inside it (600 frames)."""
+    path = tmp_path_factory.mktemp("fill") / "syn.c3d"
+    write_c3d(synthesize(load_layout("han19"), 600, seed=1).take, path)
+    return path
+
+
+@pytest.fixture
+def labeled(empty_scene, bpy_module, take_file, tmp_path):
+    bpy = bpy_module
+    coll = _import(bpy, take_file, tmp_path)
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    return bpy, coll
+
+
+def _objects(coll):
+    return {int(o["mocap_label"]): o for o in coll["mocap_labeled"].all_objects}
+
+
+def _keys(obj):
+    """(frames, key type names) of an empty's location keys."""
+    from mocap_autolabel.blender import animio
+
+    fc = animio.find_fcurve(obj, "location", 0)
+    names = {animio.key_type_value(t): t for t in (*KEY_TYPES, "GENERATED", "MOVING_HOLD")}
+    return animio.read_keys(fc)[0], [names[v] for v in animio.read_key_types(fc)]
+
+
+def _gap_labels(coll) -> list[int]:
+    """Labels with a gap inside the take (samples before and after it)."""
+    per = state(coll).labeling.per_sample()
+    out = []
+    for label in range(len(state(coll).labeling.names)):
+        seen = np.flatnonzero((per == label).any(axis=1))
+        if len(seen) and len(seen) < seen[-1] - seen[0] + 1:
+            out.append(label)
+    return out
+
+
+def test_fill_gaps_keys_fills_as_generated_and_clear_fill_removes_them(labeled):
+    bpy, coll = labeled
+    gappy = _gap_labels(coll)
+    assert gappy, "the take must have a gap to fill"
+    objs = _objects(coll)
+    before = {label: _keys(objs[label]) for label in gappy}
+    _select(bpy)  # nothing selected: every labeled marker
+    assert bpy.ops.mocap_autolabel.fill_gaps(method="spline") == {"FINISHED"}
+    record = coll["mocap_fill"]
+    assert '"method": "spline"' in record
+    for label in gappy:
+        frames, kinds = _keys(objs[label])
+        old_frames, old_kinds = before[label]
+        assert kinds.count("GENERATED") > 0 and "GENERATED" not in old_kinds
+        measured = [f for f, k in zip(frames, kinds) if k != "GENERATED"]
+        np.testing.assert_array_equal(measured, old_frames)  # the measured keys stay as they were
+        assert [k for k in kinds if k != "GENERATED"] == old_kinds
+    assert bpy.ops.mocap_autolabel.clear_fill() == {"FINISHED"}
+    objs = _objects(coll)
+    for label in gappy:
+        assert _keys(objs[label])[1] == before[label][1]
+    assert "mocap_fill" not in coll
+
+
+def test_fill_acts_on_the_selected_markers_and_a_relabel_clears_their_fills(labeled):
+    bpy, coll = labeled
+    gappy = _gap_labels(coll)
+    objs = _objects(coll)
+    one = objs[gappy[0]]
+    _select(bpy, one)
+    assert bpy.ops.mocap_autolabel.fill_gaps(method="spline") == {"FINISHED"}
+    assert "GENERATED" in _keys(one)[1]
+    others = [label for label in gappy[1:]]
+    assert all("GENERATED" not in _keys(objs[label])[1] for label in others)
+    _select(bpy)
+    assert bpy.ops.mocap_autolabel.fill_gaps(method="auto") == {"FINISHED"}  # no solved hand: rigid, pca, spline
+    assert all("GENERATED" in _keys(objs[label])[1] for label in gappy)
+    # Unlabel a segment of the first marker: its keys are rewritten and its fills go (stated).
+    lab = state(coll).labeling
+    seg = np.flatnonzero(lab.label == gappy[0])[0]
+    bpy.context.scene.frame_set(int(lab.start[seg]) + 1)
+    _select(bpy, one)
+    assert bpy.ops.mocap_autolabel.unlabel() == {"FINISHED"}
+    assert "GENERATED" not in _keys(_objects(coll)[gappy[0]])[1]
+    assert f'"label": {gappy[0]},' not in coll.get("mocap_fill", "")
+    if len(gappy) > 1:
+        assert "GENERATED" in _keys(_objects(coll)[gappy[1]])[1]
+
+
+def test_fills_are_saved_and_exported_as_computed(labeled, tmp_path):
+    bpy, coll = labeled
+    _select(bpy)
+    assert bpy.ops.mocap_autolabel.fill_gaps(method="spline", max_gap=2.0) == {"FINISHED"}
+    counts = {label: _keys(obj)[1].count("GENERATED") for label, obj in _objects(coll).items()}
+    blend, name = tmp_path / "filled.blend", coll.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    coll = bpy.data.collections[name]
+    assert {label: _keys(obj)[1].count("GENERATED") for label, obj in _objects(coll).items()} == counts
+    out = tmp_path / "labeled.c3d"
+    assert bpy.ops.mocap_autolabel.export_labeled(filepath=str(out)) == {"FINISHED"}
+    back = read_c3d(out)
+    names = state(coll).labeling.names
+    assert back.names[:len(names)] == names
+    for label, n in counts.items():
+        assert int(back.filled[:, label].sum()) == n
+    assert sum(counts.values()) > 0 and back.filled[:, len(names):].sum() == 0
+
+
+def test_hand_fill_without_a_solve_says_so(labeled):
+    bpy, coll = labeled
+    _select(bpy)
+    with pytest.raises(RuntimeError, match="Solve Hand first"):
+        bpy.ops.mocap_autolabel.fill_gaps(method="hand")
+
+
+def test_a_new_solve_refills_the_gaps_filled_from_the_hand(labeled):
+    """The solve is stood in for by markers of a known track (a real one takes seconds and is tested
+    in test_fill); what is checked is that the hand's fills follow a new solve."""
+    from mocap_autolabel.blender.fill import fill_scene, filled_keys, refill
+    from mocap_autolabel.blender.review import current_take
+    from mocap_autolabel.core.fill import fill_markers
+    from mocap_autolabel.core.hand.ik import Fit
+    from mocap_autolabel.core.labeling import labeled_take, layout_markers
+    from mocap_autolabel.core.pipeline import HandSolve
+
+    bpy, coll = labeled
+    layout = load_layout("han19")
+    observed = layout_markers(labeled_take(current_take(coll), state(coll).labeling), layout)
+    track = np.nan_to_num(fill_markers(observed, 120.0, "spline", max_gap=100.0).positions)
+
+    def solve(wobble: float) -> list:
+        markers = track + wobble * np.sin(np.arange(len(track)) / 7.0)[:, None, None]
+        fit = Fit(np.zeros((len(track), 26)), markers, np.zeros(track.shape[:2]), np.ones(len(track), dtype=bool))
+        return [("", HandSolve(None, fit, layout, 120.0, 1, {}))]
+
+    report = fill_scene(coll, "hand", 1.0, solves=solve(0.0))
+    assert report["filled"] > 0 and set(report["methods"]) == {"hand"}
+    _, _, before = filled_keys(coll, len(layout))
+    again = refill(coll, solve(0.01))  # another solve: other fills of the same gaps
+    _, _, after = filled_keys(coll, len(layout))
+    assert again["filled"] == report["filled"] and before.shape == after.shape
+    assert np.abs(after - before).max() > 1e-4
