@@ -91,6 +91,10 @@ def test_fill_acts_on_the_selected_markers_and_a_relabel_clears_their_fills(labe
     _select(bpy)
     assert bpy.ops.mocap_autolabel.fill_gaps(method="auto") == {"FINISHED"}  # no solved hand: rigid, pca, spline
     assert all("GENERATED" in _keys(objs[label])[1] for label in gappy)
+    # Another Confident at recolours markers: their fills stay.
+    counts = {label: _keys(objs[label])[1].count("GENERATED") for label in gappy}
+    bpy.context.scene.mocap_autolabel.sure = 0.6
+    assert {label: _keys(objs[label])[1].count("GENERATED") for label in gappy} == counts
     # Unlabel a segment of the first marker: its keys are rewritten and its fills go (stated).
     lab = state(coll).labeling
     seg = np.flatnonzero(lab.label == gappy[0])[0]

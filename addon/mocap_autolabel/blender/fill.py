@@ -6,9 +6,10 @@ fills apart from measured samples, and the marker is shown in the gap. The take 
 what was filled in ``mocap_fill`` (method, max gap, every gap); the keys are the fill itself: a
 saved .blend keeps both, and *Export Labeled C3D* writes the ``GENERATED`` keys as computed samples.
 
-A relabel or correction rewrites the markers it changes from their measured samples: their fills go
-(the record drops them) and *Fill Gaps* fills them again. A re-solve of the hand refills every
-filled gap with the new solve.
+A relabel or correction that changes a marker's samples rewrites it from its measured samples:
+its fills go (the record drops them) and *Fill Gaps* fills them again; a marker rewritten only for
+its confidence colours keeps them. A re-solve of the hand refills every filled gap with the new
+solve.
 
 The fill is the core's (:func:`core.fill.fill_gaps`); the hand comes from the take's solved rig
 (its calibration, solved again on the current labels), where there is one.
@@ -64,28 +65,50 @@ def forget_fills(take_coll: bpy.types.Collection, labels) -> None:
         _store(take_coll, record)
 
 
-def filled_keys(take_coll: bpy.types.Collection, n_labels: int) -> tuple[np.ndarray, np.ndarray]:
+def _fill_keys(take_coll: bpy.types.Collection, obj) -> tuple[np.ndarray, np.ndarray]:
+    """An empty's :data:`FILL_KEY` location keys: sample indices ``(k,)`` and ``(k, 3)`` metres (the
+    import's Scale taken off)."""
+    curves = [animio.find_fcurve(obj, "location", axis) for axis in range(3)] if obj is not None else [None]
+    if any(c is None for c in curves):
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    mine = animio.read_key_types(curves[0]) == animio.key_type_value(FILL_KEY)
+    frames = animio.read_keys(curves[0])[0][mine]
+    xyz = np.stack([animio.read_keys(c)[1][mine] for c in curves], axis=1) / float(take_coll.get("mocap_scale", 1.0))
+    return np.rint(frames).astype(np.int64) - first_frame(take_coll), xyz
+
+
+def filled_keys(take_coll: bpy.types.Collection, n_labels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The fills as the keys hold them: sample indices and labels ``(k,)`` each, and ``(k, 3)``
-    metres (the import's Scale taken off), from the ``GENERATED`` location keys of the labeled empties."""
-    scale = float(take_coll.get("mocap_scale", 1.0))
-    first = first_frame(take_coll)
-    kind = animio.key_type_value(FILL_KEY)
-    idx, labels, xyz = [], [], []
-    for label in range(n_labels):
-        obj = labeled_object(take_coll, label)
-        curves = [animio.find_fcurve(obj, "location", axis) for axis in range(3)] if obj else [None]
-        if any(c is None for c in curves):
-            continue
-        mine = animio.read_key_types(curves[0]) == kind
-        if not mine.any():
-            continue
-        frames = animio.read_keys(curves[0])[0][mine]
-        idx.append(np.rint(frames).astype(np.int64) - first)
-        labels.append(np.full(int(mine.sum()), label))
-        xyz.append(np.stack([animio.read_keys(c)[1][mine] for c in curves], axis=1) / scale)
-    if not idx:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    return np.concatenate(idx), np.concatenate(labels), np.concatenate(xyz)
+    metres, from the :data:`FILL_KEY` location keys of the labeled empties."""
+    found = [(label, *_fill_keys(take_coll, labeled_object(take_coll, label))) for label in range(n_labels)]
+    idx = np.concatenate([[0]] + [i for _, i, _ in found])[1:].astype(np.int64)
+    labels = np.concatenate([[0]] + [np.full(len(i), label) for label, i, _ in found])[1:].astype(np.int64)
+    return idx, labels, np.concatenate([np.zeros((0, 3))] + [x for _, _, x in found])
+
+
+def keep_fills(take_coll: bpy.types.Collection, previous, labeling, labels, n_frames: int) -> dict:
+    """Before a labeling's markers ``labels`` are rewritten: the fills of those whose samples stay
+    the same (only their confidence colours change), ``{label: (bool (F,), (F, 3) metres)}``."""
+    record = fill_record(take_coll)
+    filled = {g["label"] for g in record.get("gaps", [])} & {int(v) for v in labels}
+    if previous is None or not filled:
+        return {}
+    before, now = previous.per_sample(), labeling.per_sample()
+    out = {}
+    for label in sorted(filled):
+        if np.array_equal(before == label, now == label):
+            idx, xyz = _fill_keys(take_coll, labeled_object(take_coll, label))
+            mask, positions = np.zeros(n_frames, dtype=bool), np.full((n_frames, 3), np.nan)
+            ok = (idx >= 0) & (idx < n_frames)
+            mask[idx[ok]], positions[idx[ok]] = True, xyz[ok]
+            out[label] = (mask, positions)
+    return out
+
+
+def restore_fills(take_coll: bpy.types.Collection, take, layout, labeling, kept: dict) -> None:
+    """Key again the fills :func:`keep_fills` kept (after their markers were rewritten)."""
+    for label, (mask, positions) in kept.items():
+        _key_label(take_coll, take, layout, labeling, label, mask, positions)
 
 
 def _key_label(take_coll: bpy.types.Collection, take, layout, labeling, label: int,

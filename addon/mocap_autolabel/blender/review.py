@@ -306,6 +306,9 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
     xyz = np.full((take.n_frames, n_labels, 3), np.nan, dtype=np.float32)
     xyz[f, per[f, s]] = take.positions[f, s] * scale
     todo = range(n_labels) if previous is None else changed_labels(previous, labeling, previous_sure, sure).tolist()
+    from .fill import forget_fills, keep_fills, restore_fills
+
+    kept = keep_fills(take_coll, previous, labeling, todo, take.n_frames)  # markers only recoloured
     objs = _labeled_objects(labeled)
     for label in todo:
         obj = objs.get(label)
@@ -321,10 +324,8 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
         for fc in curves:
             if fc.group is not None and fc.group.color_set != FINGER_COLOR_SETS[finger]:
                 fc.group.color_set = FINGER_COLOR_SETS[finger]
-    if todo:
-        from .fill import forget_fills
-
-        forget_fills(take_coll, todo)  # rewritten from their measured samples: their fills went
+    restore_fills(take_coll, take, layout, labeling, kept)
+    forget_fills(take_coll, [label for label in todo if label not in kept])  # their samples changed
 
     # Unlabeled samples, one empty per slot that has any.
     null_class = null_classes(labeling, sure)
