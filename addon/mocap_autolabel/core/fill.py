@@ -21,9 +21,10 @@ position or velocity. A gap at the start or end of the take, longer than ``max_g
 one that the chosen method cannot fill (the hand unsolved in its frames, partners unseen), is left
 open, and the result says why.
 
-Every fill comes with a per-sample estimate of its error (metres) from what the take shows near
-the gap: for a spline, the marker's acceleration there; for a model, how much the model's offset
-from the marker varies there. ``auto`` compares these estimates.
+Every fill comes with a per-sample estimate of its error (metres) measured on the take itself: the
+same method over gaps of the same length hidden in the marker's own samples near the gap
+(:data:`TESTS` of them within :data:`NEAR` seconds; for a hand solve, which saw those samples,
+with its offsets at the gap's own ends added). ``auto`` compares these estimates.
 
 Units: metres; arrays ``(F, M, 3)`` for F frames of M markers, NaN where a sample is missing.
 """
@@ -640,7 +641,7 @@ def fill_gaps(take: Take, layout: Layout, method: str = "auto", max_gap: float =
         method: one of :data:`METHODS`.
         max_gap: seconds; longer gaps are left open.
         solves: ``[(side, HandSolve)]`` as :func:`.pipeline.solve_hands` gives for this take; None
-            solves here when the method may use the hand (``hand``, ``auto``).
+            solves here when the method may use the hand (``hand``, ``auto``); ``[]``: no hand.
         naming: how two hands' names carry their side (:class:`.hands.HandNaming`).
         solve_options: passed to :func:`.pipeline.solve_hands` when solving here.
 
