@@ -232,11 +232,11 @@ def test_every_readme_batch_example_runs_as_written(tmp_path):
     # the synopsis, every optional flag given (INPUTS, OUT_DIR and the files filled in), on the han19 takes
     words = commands[0].split()[3:]
     flags = [w.strip("[]") for w in words if w.startswith("[--")]
-    assert {"--jobs", "--solve-hand", "--blend", "--fbx", "--bvh", "--validate"} <= set(flags)
+    assert {"--jobs", "--solve-hand", "--blend", "--fbx", "--bvh", "--validate", "--fill", "--max-gap"} <= set(flags)
     _synthetic(tmp_path / "han19", 2)
     values = {"--config": "han19.toml", "--layout": "han19", "--model": str(ROOT / "addon" / "mocap_autolabel" /
                                                                             "models" / "set_han19.onnx"),
-              "--jobs": "2", "--calibration": None, "--method": "set"}
+              "--jobs": "2", "--calibration": None, "--method": "set", "--fill-method": "spline", "--max-gap": "0.5"}
     _write(tmp_path / "han19.toml", "[batch]\nconfident = 0.9\n")
     argv = ["batch", "han19", "-o", "synopsis"]
     for flag in flags:
@@ -250,6 +250,7 @@ def test_every_readme_batch_example_runs_as_written(tmp_path):
     assert "partial.blend" not in done.stdout + done.stderr  # Blender's own save lines stay out
     for suffix in (".labeled.c3d", ".report.json", ".blend", ".fbx", ".bvh"):
         assert (tmp_path / "synopsis" / f"synth0{suffix}").stat().st_size > 0
+    assert json.loads((tmp_path / "synopsis" / "synth0.report.json").read_text())["fill"]["method"] == "spline"
 
 
 def _write(path: Path, text: str) -> str:

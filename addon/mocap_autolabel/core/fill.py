@@ -407,7 +407,8 @@ def _end_correction(x: np.ndarray, inner: np.ndarray, ends: tuple[np.ndarray, np
 #: Test windows of the take's own samples that an error estimate is measured on.
 TESTS = 8
 #: Share of an in-sample model's offsets at the gap's ends (out of sample) counted into its expected
-#: error (its offsets in the test windows are in sample: too small).
+#: error (its offsets in the test windows are in sample: too small); of another model's, half of
+#: the offset's change from one end to the other.
 END_SHARE = 1.0
 #: Seconds at each end of a gap over which a hand solve lets go of the marker it saw next to it
 #: (:func:`_settled`).
@@ -472,9 +473,10 @@ def _model_fill(model: _Model, m: int, x: np.ndarray, valid: np.ndarray, start: 
 
     The expected error per sample: how far the model's offset from the marker strays from its
     blend between the ends over gaps of the same length hidden near this one (RMS; a rigid or PCA
-    model predicts the marker there as in a gap). A hand solve saw the marker there and fits it
-    better than it predicts it: :data:`END_SHARE` of its offsets at this gap's own ends (out of
-    sample) is added in quadrature (shaped by :func:`_shape`).
+    model predicts the marker there as in a gap). Added in quadrature (shaped by :func:`_shape`):
+    for a hand solve, which saw the marker there and fits it better than it predicts it,
+    :data:`END_SHARE` of its offsets at this gap's own ends (out of sample); for a rigid or PCA
+    model, half as much of the change of its offset from one end to the other.
     """
     n = stop - start
     ok = model.available(m)
@@ -503,7 +505,10 @@ def _model_fill(model: _Model, m: int, x: np.ndarray, valid: np.ndarray, start: 
             off = offset[good]
             err = np.linalg.norm(off[:, 1:-1] - (off[:, :1] * (1 - s) + off[:, -1:] * s), axis=2)
             spread = np.sqrt(np.mean(err ** 2, axis=0))
-    missed = END_SHARE * 0.5 * (np.linalg.norm(da) + np.linalg.norm(db)) * _shape(n) if model.in_sample else 0.0
+    if model.in_sample:
+        missed = END_SHARE * 0.5 * (np.linalg.norm(da) + np.linalg.norm(db)) * _shape(n)
+    else:  # its offset is its own in the test windows too; a change across the gap is a doubt
+        missed = END_SHARE * 0.5 * np.linalg.norm(db - da) * _shape(n)
     return inner + corr, NOISE + np.sqrt(spread ** 2 + missed ** 2)
 
 
