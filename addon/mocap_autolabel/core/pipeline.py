@@ -20,7 +20,7 @@ from .hand.calibrate import Calibration, calibrate
 from .hand.ik import GATE, MIN_MARKERS, Fit
 from .hands import HandNaming, Hands, decide_sides, find_hands, replace_valid, side_evidence
 from .labelers import METHODS, FrameBatch, Labeler, make_labeler, pack_frames
-from .labelers.assign import assign, row_probabilities
+from .labelers.assign import assign, row_log_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
 from .layout import Layout
 from .take import Take
@@ -531,14 +531,15 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         continuity = load_continuity(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
     info["continuity"] = [float(v) for v in continuity]
 
-    def decide(scores: np.ndarray, first: Labeling | None = None) -> Labeling:
+    def decide(scores: np.ndarray, first: Labeling | None = None, samples: Samples | None = None) -> Labeling:
         return _decide(scores, batch, take, hand_labels, method, temporal, segments, locked_at, info, score, p, q,
                        split_swaps, n_best, calibrate, null_prior, crossings, switch_cost, partner,
-                       continuity, first)
+                       continuity, first, samples)
 
     say(f"temporal step: {temporal}")
     t = time.perf_counter()
-    labeling = decide(scores)
+    samples = score_samples(scores, batch)
+    labeling = decide(scores, samples=samples)
     times["temporal"] = time.perf_counter() - t
     if found.count == 2:
         # A marker given to the wrong hand is one its labeler rejects: trajectories left null near
@@ -549,7 +550,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             t = time.perf_counter()
             joint = _two_hand_scores(take_in, layout, found, batch, labeler, rows, joint)
             scores = _apply_constraints(joint, slots, mask, constraints)
-            labeling = decide(scores, first=labeling)
+            labeling = decide(scores, first=labeling, samples=score_samples(scores, batch, rows, samples))
             times["hands_again"] = time.perf_counter() - t
         info["hands_offered_again"] = offered
     share(decided)
@@ -590,24 +591,46 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     return labeling
 
 
+def score_samples(scores: np.ndarray, batch: FrameBatch, rows: np.ndarray | None = None,
+                  previous: Samples | None = None) -> Samples:
+    """The scored samples of a take, in the order of ``np.nonzero(batch.mask)``: floored
+    log-probabilities and the per-frame assignment. With ``rows`` (frame indices) and the
+    ``previous`` samples of the same batch, only the samples of those frames are computed again."""
+    mask, slots = batch.mask, batch.slots
+    if rows is not None and previous is not None:
+        rows = np.asarray(rows, dtype=np.int64)
+        sub = score_samples(scores[rows], FrameBatch(batch.points[rows], mask[rows], slots[rows]))
+        again = np.zeros(mask.shape[0], dtype=bool)
+        again[rows] = True
+        at = again[previous.frame]  # samples are in frame order, as are the rows' own
+        out = replace(previous, logp=previous.logp.copy(), label=previous.label.copy(),
+                      confidence=previous.confidence.copy())
+        out.logp[at], out.label[at], out.confidence[at] = sub.logp, sub.label, sub.confidence
+        return out
+    f_idx, k_idx = np.nonzero(mask)
+    logp = row_log_probabilities(scores[f_idx, k_idx])  # == scores[mask], in its order
+    frame_labels, frame_conf = assign(scores, mask, logp)
+    np.maximum(logp, np.float32(LOG_FLOOR), out=logp)
+    return Samples(frame=f_idx.astype(np.int64), slot=slots[f_idx, k_idx].astype(np.int64), logp=logp,
+                   label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
+
+
 def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabels, method: str, temporal: str,
             segments: Segments, locked_at: np.ndarray, info: dict, score: str, p: float, q: float,
             split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float],
             crossings: dict[int, list[int]], switch_cost: tuple[float, float],
             partner: tuple[float, float] | None, continuity: tuple[float, float],
-            first: Labeling | None = None) -> Labeling:
+            first: Labeling | None = None, samples: Samples | None = None) -> Labeling:
     """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences. With ``first``
     (an earlier labeling of the take), the evidence of rigid partners and continuity is read off it
-    and one vote is held, instead of a first vote to read it off."""
+    and one vote is held, instead of a first vote to read it off. ``samples``: the scores as
+    :func:`score_samples` gives them, where the caller has them already."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
     layout, n_labels = labels.layout, len(labels)
     f_idx, k_idx = np.nonzero(mask)
-    probabilities = row_probabilities(scores[f_idx, k_idx].astype(np.float64))  # == scores[mask], in its order
-    logp = np.log(np.maximum(probabilities, np.exp(LOG_FLOOR))).astype(np.float32)
-    frame_labels, frame_conf = assign(scores, mask, probabilities)
-    samples = Samples(frame=f_idx.astype(np.int64), slot=slots[f_idx, k_idx].astype(np.int64), logp=logp,
-                      label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
+    if samples is None:
+        samples = score_samples(scores, batch)
     if temporal == "vote":
         def run_vote(scored: Samples) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
             return vote(scored, segments, locked_at, score, p, q, split_swaps, null_prior=null_prior,
@@ -651,12 +674,14 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
                             label=label.astype(np.int16), confidence=np.zeros(len(decided), dtype=np.float32),
                             locked=first_locked != EMPTY, info=info)
     else:
+        per = np.full(valid.shape, NULL, dtype=np.int16)
         if temporal == "viterbi":
             from .temporal.viterbi import viterbi_labels
 
             frame_labels = viterbi_labels(scores, mask, points, take.rate, n_best=n_best)
-        per = np.full(valid.shape, NULL, dtype=np.int16)
-        per[f_idx, slots[f_idx, k_idx]] = frame_labels[f_idx, k_idx]
+            per[f_idx, slots[f_idx, k_idx]] = frame_labels[f_idx, k_idx]
+        else:
+            per[samples.frame, samples.slot] = samples.label
         split = np.zeros(valid.shape, dtype=bool)
         split[segments.start, segments.slot] = True
         labeling = segments_from_runs(labels.names, per, valid, info, split=split)

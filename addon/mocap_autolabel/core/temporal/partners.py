@@ -130,12 +130,16 @@ def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_
         return out.T
     holder = _holders(frame, label, n_labels)
     positions = np.asarray(positions, dtype=np.float32)  # millimetre tolerances: float32 is ample
+    inside, outside = np.float32(inside), np.float32(outside)
     for b in np.unique(rigid.pairs[:, 1]):
-        partner = holder[frame, b]
-        seen = np.flatnonzero((partner >= 0) & (label != b))
-        diff = positions[seen] - positions[partner[seen]]
+        # Label b's position in each frame, then every sample's distance to it (NaN: b unseen).
+        at = np.full((len(holder), 3), np.nan, dtype=np.float32)
+        held = holder[:, b] >= 0
+        at[held] = positions[holder[held, b]]
+        diff = positions - at[frame]
         d = np.sqrt(np.einsum("ij,ij->i", diff, diff))  # once for every label paired with b
+        d[label == b] = np.nan  # b's own samples have no partner b
+        against = np.where(np.isnan(d), np.float32(0), -outside)
         for r in np.flatnonzero(rigid.pairs[:, 1] == b):
-            out[rigid.pairs[r, 0], seen] += np.where(np.abs(d - rigid.distance[r]) <= rigid.tolerance[r],
-                                                     inside, -outside)
+            out[rigid.pairs[r, 0]] += np.where(np.abs(d - rigid.distance[r]) <= rigid.tolerance[r], inside, against)
     return out.T

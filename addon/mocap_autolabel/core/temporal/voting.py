@@ -16,7 +16,7 @@ Two scores are available:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
@@ -99,7 +99,13 @@ def find_swaps(samples: Samples, seg: np.ndarray, segments: Segments, min_run: i
     seg_sorted = seg[order]
     bounds = np.searchsorted(seg_sorted, np.arange(len(segments) + 1))
     best = np.argmax(samples.logp, axis=1)
-    for s in range(len(segments)):
+    # A segment whose frames all prefer one label has nothing to cut: that label is also the best
+    # of its sum (each frame's log-probability of it is its highest), so neither test below fires.
+    best_sorted = best[order]
+    flips = np.flatnonzero((best_sorted[1:] != best_sorted[:-1]) & (seg_sorted[1:] == seg_sorted[:-1]))
+    for s in np.unique(seg_sorted[flips + 1]):
+        if s < 0:
+            continue
         lo, hi = bounds[s], bounds[s + 1]
         if hi - lo > min_run:
             for frame in _edge_swaps(samples.logp[order[lo:hi]], best[order[lo:hi]],
@@ -172,7 +178,8 @@ def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: s
     if score == "likelihood":
         # Sums per segment as a sparse product: many times faster than np.add.at.
         member = csr_matrix((np.ones(len(seg)), (seg, np.arange(len(seg)))), shape=(n_segments, len(seg)))
-        return np.asarray(member @ samples.logp[ok].astype(np.float64)), count
+        logp = samples.logp if ok.all() else samples.logp[ok]
+        return np.asarray(member @ logp.astype(np.float64, copy=False)), count
     if score == "power":
         col = np.where(samples.label[ok] >= 0, samples.label[ok], m1 - 1).astype(np.int64)
         acc = np.bincount(seg * m1 + col, weights=samples.confidence[ok].astype(np.float64) ** p,
@@ -455,6 +462,8 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
         segments = split_segments(segments, swaps)
         seg = segment_of(segments, samples.frame, samples.slot)
     facts = {"swaps_split": int(sum(len(v) for v in swaps.values())), "refined": 0, "time_limited": 0}
+    if score == "likelihood":  # summed in float64 in every round: convert once
+        samples = replace(samples, logp=samples.logp.astype(np.float64))
     while True:
         weights, count = segment_weights(samples, seg, len(segments), score, p, q)
         weights[:, -1] += null_prior[0] * tracklet_share(segments) + null_prior[1] * count
