@@ -235,6 +235,13 @@ class _HandLabels:
         return RigidPairs(np.concatenate([one.pairs + h * self.m for h in range(self.hands)]),
                           np.tile(one.distance, self.hands), np.tile(one.tolerance, self.hands))
 
+    def hand_pairs(self, rigid: RigidPairs, h: int) -> RigidPairs:
+        """The pairs of ``rigid`` (from :meth:`rigid_pairs`) within hand ``h``; all of them for one hand."""
+        if self.hands == 1:
+            return rigid
+        own = rigid.pairs[:, 0] // self.m == h
+        return RigidPairs(rigid.pairs[own], rigid.distance[own], rigid.tolerance[own])
+
     def to_internal(self, label: int, order: list[int]) -> int:
         """A final label (sides' order: left hand first) as the internal one (hands' order)."""
         if label < 0:
@@ -531,10 +538,14 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         continuity = load_continuity(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
     info["continuity"] = [float(v) for v in continuity]
 
+    f_idx, k_idx = np.nonzero(mask)
+    member = None if found.count == 1 else \
+        np.stack([found.members(h)[f_idx, slots[f_idx, k_idx]] for h in range(2)], axis=1)
+
     def decide(scores: np.ndarray, first: Labeling | None = None, samples: Samples | None = None) -> Labeling:
         return _decide(scores, batch, take, hand_labels, method, temporal, segments, locked_at, info, score, p, q,
                        split_swaps, n_best, calibrate, null_prior, crossings, switch_cost, partner,
-                       continuity, first, samples)
+                       continuity, first, samples, member)
 
     say(f"temporal step: {temporal}")
     t = time.perf_counter()
@@ -549,6 +560,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             say("temporal step: both hands again")
             t = time.perf_counter()
             joint = _two_hand_scores(take_in, layout, found, batch, labeler, rows, joint)
+            member = np.stack([found.members(h)[f_idx, slots[f_idx, k_idx]] for h in range(2)], axis=1)
             scores = _apply_constraints(joint, slots, mask, constraints)
             labeling = decide(scores, first=labeling, samples=score_samples(scores, batch, rows, samples))
             times["hands_again"] = time.perf_counter() - t
@@ -620,11 +632,13 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
             split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float],
             crossings: dict[int, list[int]], switch_cost: tuple[float, float],
             partner: tuple[float, float] | None, continuity: tuple[float, float],
-            first: Labeling | None = None, samples: Samples | None = None) -> Labeling:
+            first: Labeling | None = None, samples: Samples | None = None,
+            member: np.ndarray | None = None) -> Labeling:
     """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences. With ``first``
     (an earlier labeling of the take), the evidence of rigid partners and continuity is read off it
     and one vote is held, instead of a first vote to read it off. ``samples``: the scores as
-    :func:`score_samples` gives them, where the caller has them already."""
+    :func:`score_samples` gives them, where the caller has them already. ``member``: bool
+    ``(n, hands)``, the hands each sample is offered to (two hands; None: one)."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
     layout, n_labels = labels.layout, len(labels)
@@ -651,18 +665,24 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
             # vote's labels.
             extra = np.zeros_like(samples.logp)
             at = points[f_idx, k_idx].astype(np.float64)
+            # Each hand's evidence for the samples offered to it (the others score its labels at the
+            # floor, far below anything the evidence adds).
+            m = labels.m
+            rows = [None] if member is None else [np.flatnonzero(member[:, h]) for h in range(labels.hands)]
             if with_rigid:
                 rigid = take_distances(rigid, at, samples.frame, per, n_labels)
-                extra += partner_logp(at, samples.frame, per, n_labels, rigid, *partner)
+                for h, sel in enumerate(rows):
+                    extra += partner_logp(at, samples.frame, per, n_labels, labels.hand_pairs(rigid, h), *partner,
+                                          rows=sel)
             if with_continuity:
                 held_for = held if first is not None else \
                     np.where(seg >= 0, (decided.stop - decided.start)[np.maximum(seg, 0)], 0)
                 # Per hand: a marker's neighbours, whose motion carries it across a gap, are its own hand's.
-                m = labels.m
                 for h in range(labels.hands):
                     own = np.where((per >= h * m) & (per < (h + 1) * m), per - h * m, NULL)
                     extra[:, h * m:(h + 1) * m] += continuity_logp(at, samples.frame, samples.slot, own, held_for,
-                                                                   segments, m, take.rate, *continuity)[:, :m]
+                                                                   segments, m, take.rate, *continuity,
+                                                                   rows=rows[min(h, len(rows) - 1)])[:, :m]
             if extra.any() or first is not None:
                 stopped = facts["time_limited"]
                 decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))

@@ -38,7 +38,8 @@ WINDOW = 12
 
 def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, label: np.ndarray,
                     held_for: np.ndarray, tracklets: Segments, n_labels: int, rate: float,
-                    inside: float, outside: float, window: int | None = None) -> np.ndarray:
+                    inside: float, outside: float, window: int | None = None,
+                    rows: np.ndarray | None = None) -> np.ndarray:
     """Evidence ``(n, M + 1)`` nats of each sample for each label from continuity at the ends of
     its trajectory (the null column is 0).
 
@@ -52,6 +53,8 @@ def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, 
         rate: frames per second.
         inside, outside: nats per sample for (against) a label at (not at) its predicted spot.
         window: frames at each end that earn the evidence (default :data:`WINDOW`).
+        rows: the samples to weigh (indices; default all): only their trajectories' ends are
+            checked, and the other samples get 0. Anchors are read off all samples.
     """
     n = len(frame)
     window = WINDOW if window is None else window
@@ -75,13 +78,15 @@ def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, 
     anchored = np.full((frames, n_slots), -1, dtype=np.int64)  # the label a sample anchors, if any
     anchored[frame[anchor], slot[anchor]] = label[anchor]
     seg = segment_of(tracklets, frame, slot)
-    s = np.flatnonzero(seg >= 0)  # the samples on a checked trajectory
+    s = np.flatnonzero(seg >= 0) if rows is None else np.asarray(rows)[seg[rows] >= 0]  # on a checked trajectory
+    checked = np.zeros(len(tracklets), dtype=bool)
+    checked[seg[s]] = True
     max_gap = MAX_GAP_S * rate
     before = np.where((tracklets.start > 0)[:, None], last[np.maximum(tracklets.start - 1, 0)], -1)
     after = np.where((tracklets.stop < frames)[:, None], first[np.minimum(tracklets.stop, frames - 1)], frames)
     for end, at, t0 in (("start", tracklets.start, before), ("stop", tracklets.stop - 1, after)):
         gap = np.abs(at[:, None] - t0)
-        ok = (t0 >= 0) & (t0 < frames) & (gap <= max_gap)
+        ok = (t0 >= 0) & (t0 < frames) & (gap <= max_gap) & checked[:, None]
         evidence = np.zeros((len(tracklets), n_labels), dtype=np.float32)
         ti, li = np.nonzero(ok)
         if len(ti):
