@@ -277,41 +277,46 @@ def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = N
     return out
 
 
-def _two_hand_scores(take: Take, layout: Layout, found: Hands, batch: FrameBatch, labeler: Labeler,
-                     rows: np.ndarray | None = None, joint: np.ndarray | None = None) -> np.ndarray:
-    """Joint per-frame scores ``(F, K, 2M + 1)`` of a two-hand take: each hand's points are scored by
-    ``labeler`` on their own; a sample offered to both hands gets both, each at half the weight;
-    a sample of no hand is null. With ``rows`` (frame indices) and the ``joint`` scores of an
-    earlier call, only those frames are scored again (a copy of ``joint`` is returned)."""
+def _hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBatch, labeler: Labeler,
+                 rows: np.ndarray) -> np.ndarray:
+    """One hand's scores ``(R, K, M + 1)`` of the ``rows`` (frame indices) of the joint ``batch``, in
+    its columns: the points ``members`` (bool ``(F, P)``) offers to the hand, scored by ``labeler``
+    on their own; NaN where the hand was not offered the point."""
     m = len(layout)
-    rows = np.arange(take.n_frames) if rows is None else np.asarray(rows)
     mask, slots = batch.mask[rows], batch.slots[rows]
     frames, k = mask.shape
-    part_joint = np.full((frames, k, 2 * m + 1), _OTHER_HAND, dtype=np.float32)
+    out = np.full((frames, k, m + 1), np.nan, dtype=np.float32)
     column = np.full((frames, take.n_points), -1, dtype=np.int64)  # joint column of each (frame, slot)
     f_idx, k_idx = np.nonzero(mask)
     column[f_idx, slots[f_idx, k_idx]] = k_idx
+    positions = np.where(members[rows][..., None], take.positions[rows], np.nan).astype(np.float32)
+    part = _pack(replace(take, positions=positions, residuals=None), _cap(layout))
+    scores = labeler.scores(part.points, part.mask)
+    pf, pk = np.nonzero(part.mask)
+    jk = column[pf, part.slots[pf, pk]]
+    ok = jk >= 0
+    out[pf[ok], jk[ok]] = scores[pf[ok], pk[ok]]
+    return out
+
+
+def _joint_scores(hand_scores: Sequence[np.ndarray], found: Hands, batch: FrameBatch,
+                  rows: np.ndarray) -> np.ndarray:
+    """Joint per-frame scores ``(R, K, 2M + 1)`` of the ``rows`` of a two-hand take from each hand's
+    scores (:func:`_hand_scores`, all frames): a sample offered to both hands gets both, each at
+    half the weight; a sample of no hand is null."""
+    m = hand_scores[0].shape[2] - 1
+    slots = batch.slots[rows]
+    frames, k = slots.shape
+    both = found.both[rows][np.arange(frames)[:, None], np.maximum(slots, 0)] & (slots >= 0)
+    weight = np.where(both, np.log(0.5), 0.0).astype(np.float32)
+    joint = np.full((frames, k, 2 * m + 1), _OTHER_HAND, dtype=np.float32)
     null = np.full((frames, k), -np.inf)
-    cap = _cap(layout)
-    positions, both = take.positions[rows], found.both[rows]
-    for h in range(2):
-        members = found.members(h)[rows]
-        part = _pack(replace(take, positions=np.where(members[..., None], positions, np.nan).astype(np.float32),
-                             residuals=None), cap)
-        scores = labeler.scores(part.points, part.mask)
-        pf, pk = np.nonzero(part.mask)
-        ps = part.slots[pf, pk]
-        jk = column[pf, ps]
-        ok = jk >= 0
-        pf, pk, ps, jk = pf[ok], pk[ok], ps[ok], jk[ok]
-        weight = np.where(both[pf, ps], np.log(0.5), 0.0).astype(np.float32)
-        part_joint[pf, jk, h * m:(h + 1) * m] = scores[pf, pk, :m] + weight[:, None]
-        null[pf, jk] = np.logaddexp(null[pf, jk], scores[pf, pk, m] + weight)
-    part_joint[..., 2 * m] = np.where(np.isfinite(null), null, 0.0)
-    if joint is None:
-        return part_joint
-    joint = joint.copy()
-    joint[rows] = part_joint
+    for h, scores in enumerate(hand_scores):
+        scores = scores[rows]
+        seen = ~np.isnan(scores[..., m])
+        joint[seen, h * m:(h + 1) * m] = scores[seen, :m] + weight[seen, None]
+        null[seen] = np.logaddexp(null[seen], scores[seen, m] + weight[seen])
+    joint[..., 2 * m] = np.where(np.isfinite(null), null, 0.0)
     return joint
 
 
@@ -496,7 +501,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     share(0.02)
     if found.count == 2:
         labeler = labeler or make_labeler(method, layout, model)
-        joint = scores = _two_hand_scores(take_in, layout, found, batch, labeler)
+        every = np.arange(take.n_frames)
+        hand_scores = [_hand_scores(take_in, layout, found.members(h), batch, labeler, every) for h in range(2)]
+        joint = scores = _joint_scores(hand_scores, found, batch, every)
     else:
         labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
         hooked = done is not None and hasattr(labeler, "on_batch")
@@ -555,11 +562,17 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if found.count == 2:
         # A marker given to the wrong hand is one its labeler rejects: trajectories left null near
         # the other hand are offered to both hands, and both are labeled again.
+        before = [found.members(h) for h in range(2)]
         offered, rows = _offer_nulls(found, labeling, take_in)
         if offered:
             say("temporal step: both hands again")
             t = time.perf_counter()
-            joint = _two_hand_scores(take_in, layout, found, batch, labeler, rows, joint)
+            for h in range(2):  # a hand whose points did not change keeps its scores
+                changed = np.flatnonzero((found.members(h) != before[h]).any(axis=1))
+                if len(changed):
+                    hand_scores[h][changed] = _hand_scores(take_in, layout, found.members(h), batch, labeler, changed)
+            joint = joint.copy()
+            joint[rows] = _joint_scores(hand_scores, found, batch, rows)
             member = np.stack([found.members(h)[f_idx, slots[f_idx, k_idx]] for h in range(2)], axis=1)
             scores = _apply_constraints(joint, slots, mask, constraints)
             labeling = decide(scores, first=labeling, samples=score_samples(scores, batch, rows, samples))
