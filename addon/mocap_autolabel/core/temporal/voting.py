@@ -62,13 +62,24 @@ def split_segments(segments: Segments, cuts: dict[int, list[int]]) -> Segments:
     """Split segments at frames: ``cuts`` maps a slot to frames where a new segment must begin."""
     if not cuts:
         return segments
-    slot, start, stop = [], [], []
-    for s, a, b in zip(segments.slot.tolist(), segments.start.tolist(), segments.stop.tolist()):
-        edges = sorted({a, b, *(c for c in cuts.get(s, ()) if a < c < b)})
-        slot += [s] * (len(edges) - 1)
-        start += edges[:-1]
-        stop += edges[1:]
-    return Segments(np.array(slot, dtype=np.int64), np.array(start, dtype=np.int64), np.array(stop, dtype=np.int64))
+    cut_slot = np.concatenate([np.full(len(v), k, dtype=np.int64) for k, v in cuts.items()])
+    cut_frame = np.concatenate([np.asarray(v, dtype=np.int64) for v in cuts.values()])
+    # The segment each cut falls strictly inside (cuts on an edge or outside every segment do nothing).
+    inside = segment_of(segments, cut_frame, cut_slot)
+    keep = inside >= 0
+    keep[keep] = cut_frame[keep] > segments.start[inside[keep]]
+    if not keep.any():
+        return segments
+    # Every segment's start, plus each cut as a new start; sorted, each runs to the next start of
+    # its slot or to its segment's end.
+    key = np.unique(np.concatenate([segments.slot * (1 << 32) + segments.start,
+                                    cut_slot[keep] * (1 << 32) + cut_frame[keep]]))
+    slot, start = key >> 32, key & ((1 << 32) - 1)
+    owner = segment_of(segments, start, slot)
+    stop = segments.stop[owner].copy()
+    nxt = np.flatnonzero(owner[1:] == owner[:-1])
+    stop[nxt] = start[nxt + 1]
+    return Segments(slot.astype(np.int64), start.astype(np.int64), stop.astype(np.int64))
 
 
 def segment_of(segments: Segments, frame: np.ndarray, slot: np.ndarray) -> np.ndarray:
