@@ -22,6 +22,7 @@ import sys
 import time
 import tomllib
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 
 TAKE_EXTENSIONS = (".c3d", ".trc", ".tsv")
@@ -41,6 +42,9 @@ class BatchSettings:
         calibration: a performer calibration .json to reuse for every take.
         blend, fbx, bvh: also write these per take (need Blender or the bpy module).
         jobs: takes processed side by side (processes).
+        scheduler: run each take as a task on a Dask cluster instead: ``tcp://HOST:8786`` (a farm's
+            scheduler; inputs and the output folder must be seen by every worker under the same paths)
+            or ``local:N`` (N worker processes here). Needs the ``distributed`` package.
         force: redo takes whose outputs are already complete.
         hands: ``auto`` (find how many hands each take holds), ``1`` or ``2``.
         hand_names: how two hands' labels carry their side (see ``label --hand-names``).
@@ -59,6 +63,7 @@ class BatchSettings:
     fbx: bool = False
     bvh: bool = False
     jobs: int = 1
+    scheduler: str | None = None
     force: bool = False
     hands: str = "auto"
     hand_names: str | None = None
@@ -165,6 +170,23 @@ def _worker_init() -> None:
     if "bpy" in sys.modules:  # bpy already imported (a forked worker): nothing to undo
         return
     sys.path[:] = [p for p in sys.path if not os.path.isfile(os.path.join(p or ".", "bpy", "__init__.py"))]
+
+
+def farm_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
+    """:func:`process_take` as a task on a Dask worker (a fresh process that may have inherited bpy's paths)."""
+    _worker_init()
+    return process_take(path, name, out_dir, settings)
+
+
+def failed_report(path: str, name: str, out_dir: str, reason: str) -> dict:
+    """Write and return the report of a take that never finished (its worker died on every try)."""
+    from .core.atomic import atomic_output
+
+    report = {"file": os.path.abspath(path), "name": name, "status": "failed", "error": f"{path}: {reason}",
+              "seconds": {"total": 0.0}}
+    with atomic_output(os.path.join(out_dir, name + ".report.json")) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        json.dump(report, f, indent=1)
+    return report
 
 
 def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
@@ -378,32 +400,21 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
         else:
             todo.append((path, name))
     start = time.perf_counter()
-    if settings.jobs <= 1 or len(todo) <= 1:
+    workers = settings.jobs
+    if settings.scheduler:
+        from .farm import farm_client, run_on_farm, worker_threads
+
+        with farm_client(settings.scheduler) as client:
+            workers = bar.jobs = worker_threads(client)
+            for report in run_on_farm(client, todo, out_dir, settings, farm_take, failed_report):
+                rows.append(_finish(bar, report))
+    elif settings.jobs <= 1 or len(todo) <= 1:
         for path, name in todo:
             bar.event("start", name=name)
             rows.append(_finish(bar, process_take(path, name, out_dir, settings)))
     else:
-        threads = str(max(1, (os.cpu_count() or 1) // settings.jobs))
-        env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
-        saved = {k: os.environ.get(k) for k in env}
-        os.environ.update(env)  # spawned workers read these before numpy and onnxruntime start
-        try:
-            context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(settings.jobs, mp_context=context, initializer=_worker_init) as pool:
-                pending = {}
-                for path, name in todo:  # no "start" events: the pool decides when a take starts
-                    pending[pool.submit(process_take, path, name, out_dir, settings)] = name
-                while pending:
-                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in finished:
-                        pending.pop(fut)
-                        rows.append(_finish(bar, fut.result()))
-        finally:
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
+        rows += _run_pool(todo, out_dir, settings, bar)
+    _clean_partials(out_dir)  # what a worker killed mid-take left (its take was redone or is reported)
     wall = time.perf_counter() - start
     rows.sort(key=lambda r: r["name"])
     failed = [r for r in rows if r["status"] == "failed"]
@@ -411,10 +422,57 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
     summary = {"takes": len(rows), "ok": sum(r["status"] == "ok" for r in rows), "failed": len(failed),
                "skipped": sum(r["skipped"] for r in rows), "seconds": round(wall, 3),
                "frames_processed": frames, "frames_per_second": round(frames / wall, 1) if wall > 0 else None,
-               "jobs": settings.jobs, "settings": dataclasses.asdict(settings) | {"extra": None}, "takes_detail": rows}
+               "jobs": settings.jobs if not settings.scheduler else workers, "scheduler": settings.scheduler,
+               "settings": dataclasses.asdict(settings) | {"extra": None}, "takes_detail": rows}
     _write_summary(out_dir, summary)
     bar.event("end", name=f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped")
     return summary
+
+
+#: Times a take is started in a pool whose worker process died before the take is reported as failed.
+POOL_TRIES = 3
+
+
+def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings, bar: Progress) -> list[dict]:
+    """The takes in ``settings.jobs`` spawned processes; a pool whose process died (killed, out of memory) is
+    started again for the takes not finished, each up to :data:`POOL_TRIES` times, then reported as failed."""
+    rows: list[dict] = []
+    threads = str(max(1, (os.cpu_count() or 1) // settings.jobs))
+    env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)  # spawned workers read these before numpy and onnxruntime start
+    tries = dict.fromkeys((name for _, name in todo), 0)
+    try:
+        context = multiprocessing.get_context("spawn")
+        while todo:
+            broken = []
+            with ProcessPoolExecutor(settings.jobs, mp_context=context, initializer=_worker_init) as pool:
+                pending = {}
+                for path, name in todo:  # no "start" events: the pool decides when a take starts
+                    tries[name] += 1
+                    pending[pool.submit(process_take, path, name, out_dir, settings)] = (path, name)
+                while pending:
+                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        path, name = pending.pop(fut)
+                        try:
+                            rows.append(_finish(bar, fut.result()))
+                        except BrokenProcessPool:
+                            broken.append((path, name))
+            todo = []
+            for path, name in broken:
+                if tries[name] < POOL_TRIES:
+                    todo.append((path, name))
+                else:
+                    rows.append(_finish(bar, failed_report(path, name, out_dir, f"its worker process died on "
+                                                           f"each of {POOL_TRIES} tries (killed, or out of memory)")))
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    return rows
 
 
 def _finish(bar: Progress, report: dict) -> dict:
@@ -476,5 +534,7 @@ def format_table(summary: dict) -> str:
         elif r.get("warning"):
             lines.append(f"! {r['name']}: {r['warning']}")
     lines.append(f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped; "
-                 f"{summary['frames_processed']:,} frames in {summary['seconds']:.1f} s with {summary['jobs']} job(s)")
+                 f"{summary['frames_processed']:,} frames in {summary['seconds']:.1f} s " +
+                 (f"on {summary['jobs']} Dask worker thread(s) ({summary['scheduler']})" if summary.get("scheduler")
+                  else f"with {summary['jobs']} job(s)"))
     return "\n".join(lines)

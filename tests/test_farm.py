@@ -1,0 +1,107 @@
+"""Batch on a Dask cluster (``--scheduler``): the bytes of one job; a worker that dies mid-take loses nothing."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+from mocap_autolabel.batch import BatchSettings, run_batch
+from mocap_autolabel.cli import main
+from test_batch import _synthetic
+
+pytest.importorskip("distributed", reason="Dask's distributed is not installed (pip install distributed)")
+import dask  # noqa: E402  (installed with distributed)
+
+
+def same_outputs(a: Path, b: Path) -> list[str]:
+    """The take outputs of two batch folders, compared: labeled C3Ds byte for byte, reports but for their timings.
+
+    Returns the names of the takes compared; asserts no hidden temporary file is left in either.
+    """
+    names = sorted(p.name[: -len(".labeled.c3d")] for p in a.glob("*.labeled.c3d"))
+    assert names == sorted(p.name[: -len(".labeled.c3d")] for p in b.glob("*.labeled.c3d"))
+    for name in names:
+        assert (a / f"{name}.labeled.c3d").read_bytes() == (b / f"{name}.labeled.c3d").read_bytes(), name
+        ra, rb = (json.loads((d / f"{name}.report.json").read_text()) for d in (a, b))
+        ra.pop("seconds"), rb.pop("seconds")
+        assert ra == rb, name
+    for folder in (a, b):
+        assert not [p.name for p in folder.rglob("*") if ".partial" in p.name]
+    return names
+
+
+@pytest.fixture(scope="module")
+def takes_and_one_job(tmp_path_factory):
+    """Three short synthetic takes and their outputs from one local job."""
+    root = tmp_path_factory.mktemp("farm")
+    _synthetic(root / "takes", 3, frames=400)
+    summary = run_batch([str(root / "takes")], str(root / "one"), BatchSettings(), progress="none")
+    assert summary["ok"] == 3
+    return root
+
+
+def test_a_local_cluster_of_two_workers_writes_the_bytes_of_one_job(takes_and_one_job, tmp_path, capsys):
+    root = takes_and_one_job
+    out = tmp_path / "dask"
+    assert main(["batch", str(root / "takes"), "-o", str(out), "--scheduler", "local:2", "--json-progress"]) == 0
+    assert same_outputs(root / "one", out) == ["synth0", "synth1", "synth2"]
+    events = [json.loads(line) for line in capsys.readouterr().err.splitlines() if line.startswith("{")]
+    assert sorted(e["name"] for e in events if e["event"] == "done") == ["synth0", "synth1", "synth2"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["scheduler"] == "local:2" and summary["jobs"] == 2 and summary["ok"] == 3
+    # resume: a rerun on the cluster skips the finished takes; --force redoes them
+    again = run_batch([str(root / "takes")], str(out), BatchSettings(scheduler="local:2"), progress="none")
+    assert (again["skipped"], again["ok"]) == (3, 3)
+    forced = run_batch([str(root / "takes")], str(out), BatchSettings(scheduler="local:1", force=True),
+                       progress="none")
+    assert (forced["skipped"], forced["ok"]) == (0, 3)
+
+
+def test_bad_scheduler_settings_are_one_line(tmp_path, capsys):
+    takes = tmp_path / "takes"
+    _synthetic(takes, 1, frames=100)
+    assert main(["batch", str(takes), "-o", str(tmp_path / "o"), "--scheduler", "local:0"]) == 2
+    assert main(["batch", str(takes), "-o", str(tmp_path / "o"), "--scheduler", "nowhere"]) == 2
+    assert main(["batch", str(takes), "-o", str(tmp_path / "o"), "--scheduler", "local:2", "--jobs", "2"]) == 2
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        assert main(["batch", str(takes), "-o", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:9"]) == 1
+    err = capsys.readouterr().err
+    assert "1 to 64 workers" in err and "give a scheduler address" in err and "not both" in err
+    assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in err and "Traceback" not in err
+    assert not (tmp_path / "o" / "summary.json").exists()
+
+
+KILL_ONCE = '''
+import os, signal
+flag = os.environ.get("MOCAP_TEST_KILL_ONCE")
+if flag:
+    _replace = os.replace
+    def replace(src, dst, *args, **kwargs):
+        # The labeled C3D is whole in its temporary file and not yet renamed: the worker dies there, once.
+        if str(dst).endswith("synth1.labeled.c3d") and not os.path.exists(flag):
+            open(flag, "w").close()
+            os.kill(os.getpid(), signal.SIGKILL)
+        return _replace(src, dst, *args, **kwargs)
+    os.replace = replace
+'''
+
+
+def test_a_worker_killed_mid_take_loses_nothing(takes_and_one_job, tmp_path, monkeypatch):
+    """The worker writing synth1 dies (SIGKILL) with the take's C3D written to its temporary name:
+    the take is run again on a worker, the outputs are the bytes of an undisturbed run, and the
+    killed worker's temporary file is gone."""
+    root = takes_and_one_job
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(KILL_ONCE)  # loaded by the spawned worker processes only
+    flag = tmp_path / "killed"
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(hook), str(ROOT / "addon")]))
+    monkeypatch.setenv("MOCAP_TEST_KILL_ONCE", str(flag))
+    out = tmp_path / "dask"
+    summary = run_batch([str(root / "takes")], str(out), BatchSettings(scheduler="local:2"), progress="none")
+    assert flag.exists(), "the worker was not killed"
+    assert summary["ok"] == 3, summary["takes_detail"]
+    assert same_outputs(root / "one", out) == ["synth0", "synth1", "synth2"]
