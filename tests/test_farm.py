@@ -105,3 +105,41 @@ def test_a_worker_killed_mid_take_loses_nothing(takes_and_one_job, tmp_path, mon
     assert flag.exists(), "the worker was not killed"
     assert summary["ok"] == 3, summary["takes_detail"]
     assert same_outputs(root / "one", out) == ["synth0", "synth1", "synth2"]
+
+
+def test_readme_farm_example_runs_as_written(takes_and_one_job, tmp_path):
+    """README's scheduler, worker and batch lines, with HOST, its port and the /farm folders filled in."""
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = text[text.index("### On a farm: Dask"):]
+    block = block[block.index("```sh\n") + 6:block.index("```\n", block.index("```sh\n") + 6)]
+    lines = [line.split("#")[0].strip() for line in block.splitlines() if line.strip()]
+    assert [line.split()[:2] for line in lines] == [["dask", "scheduler"], ["dask", "worker"], ["python", "-m"]]
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = str(s.getsockname()[1])
+    fill = {"HOST": "127.0.0.1", "8786": port, "/farm/takes": str(takes_and_one_job / "takes"),
+            "/farm/labeled": str(tmp_path / "labeled")}
+    argv = []
+    for line in lines:
+        for key, value in fill.items():
+            line = line.replace(key, value)
+        argv.append(line.split())
+    bindir = Path(sys.executable).parent
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "addon"), PATH=f"{bindir}{os.pathsep}{os.environ['PATH']}")
+    started = [subprocess.Popen([str(bindir / "dask"), *argv[0][1:]], env=env, stderr=subprocess.DEVNULL)]
+    try:
+        time.sleep(1)
+        started.append(subprocess.Popen([str(bindir / "dask"), *argv[1][1:]], env=env, stderr=subprocess.DEVNULL))
+        done = subprocess.run([sys.executable, *argv[2][1:]], env=env, capture_output=True, text=True, timeout=300)
+    finally:
+        for proc in started[::-1]:
+            proc.terminate()
+            proc.wait(timeout=60)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "3 ok, 0 failed, 0 skipped" in done.stdout and f"(tcp://127.0.0.1:{port})" in done.stdout
+    assert same_outputs(takes_and_one_job / "one", tmp_path / "labeled") == ["synth0", "synth1", "synth2"]
