@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 
 # What each target installs on top of the package (numpy, scipy, onnxruntime, ezc3d, c3d):
-DEMO_EXTRAS  := blender,report
+DEMO_EXTRAS  := blender
 LINT_EXTRAS  := dev
 # make test (what CI runs) installs every extra a test needs, so that no test skips in CI.
 TEST_EXTRAS  := blender,dev,farm,report,train
@@ -25,7 +25,7 @@ $(VENV)/.extras-%: pyproject.toml | $(VENV)/.created
 	$(BIN)/python -m pip install -q -e ".[$*]"
 	touch $@
 
-## venv: the package with the bpy module and the HTML report (what make demo uses)
+## venv: the package with the bpy module (what make demo uses)
 venv: $(VENV)/.extras-$(DEMO_EXTRAS)
 
 ## demo: the bundled raw synthetic take -> labels (set + trajectory voting, C3D + report) and a review scene

@@ -45,6 +45,8 @@ class BatchSettings:
         scheduler: run each take as a task on a Dask cluster instead: ``tcp://HOST:8786`` (a farm's
             scheduler; inputs and the output folder must be seen by every worker under the same paths)
             or ``local:N`` (N worker processes here). Needs the ``distributed`` package.
+        html: also write an HTML page per take (``<name>.report.html``, with pictures) and ``index.html``
+            linking them (needs matplotlib).
         force: redo takes whose outputs are already complete.
         hands: ``auto`` (find how many hands each take holds), ``1`` or ``2``.
         hand_names: how two hands' labels carry their side (see ``label --hand-names``).
@@ -64,6 +66,7 @@ class BatchSettings:
     bvh: bool = False
     jobs: int = 1
     scheduler: str | None = None
+    html: bool = False
     force: bool = False
     hands: str = "auto"
     hand_names: str | None = None
@@ -152,7 +155,7 @@ def _finished(out_dir: str, name: str, settings: BatchSettings) -> dict | None:
     if not all(os.path.isfile(os.path.join(out_dir, f)) for f in outputs.values()):
         return None
     # Every rig file asked for now was written then (one per hand for a take of two hands).
-    for kind in ("blend", "fbx", "bvh"):
+    for kind in ("blend", "fbx", "bvh", "html"):
         if getattr(settings, kind) and not any(k == kind or k.startswith(kind + "_") for k in outputs):
             return None
     return report
@@ -281,6 +284,8 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     write_c3d(labeled, target)
     out["outputs"]["labeled"] = os.path.basename(target)
     timings["write"] = round(time.perf_counter() - t, 4)
+    rms: list[list] = []  # per hand solved, the marker RMS per frame (mm), and its side ("" for one hand)
+    sides: list[str] = []
     if settings.solve_hand or settings.needs_blender():
         t = time.perf_counter()
         solved = solve_hands(labeled, layout, naming, calibrations if two else
@@ -289,7 +294,8 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
         reports = []
         for side, one in solved:
             rep = one.report()
-            rep.pop("per_frame_rms_mm")
+            rms.append(rep.pop("per_frame_rms_mm"))
+            sides.append(side)
             reports.append(rep | ({"side": side} if side else {}))
         if two:
             out["hands_solved"] = reports
@@ -301,7 +307,29 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
             rigs = solved if two else solved[0][1]
             out["outputs"].update(_blender_outputs(labeled, rigs, os.path.join(out_dir, name), settings))
             timings["blender"] = round(time.perf_counter() - t, 4)
+    if settings.html:
+        t = time.perf_counter()
+        out["outputs"]["html"] = os.path.basename(name) + ".report.html"
+        _take_page(out | {"name": name, "file": os.path.abspath(path)}, labeling, take.first_frame, rms, sides,
+                   out_dir, settings)
+        timings["html"] = round(time.perf_counter() - t, 4)
     return out
+
+
+def _take_page(report: dict, labeling, first_frame: int, rms: list, sides: list[str], out_dir: str,
+               settings: BatchSettings) -> None:
+    """Write ``<name>.report.html``: the take's page, linking back to the batch's index.html."""
+    from .core.atomic import atomic_output
+    from .core.overview import label_classes
+    from .html_report import take_page
+
+    name = report["name"]
+    index = os.path.relpath("index.html", os.path.dirname(name) or ".").replace(os.sep, "/")
+    page = take_page(report | {"outputs": {k: v for k, v in report["outputs"].items() if k != "html"}},
+                     label_classes(labeling, settings.confident), labeling.names, first_frame,
+                     rms_mm=rms or None, rms_labels=[f"{s} hand" if s else "hand" for s in sides], index=index)
+    with atomic_output(os.path.join(out_dir, name + ".report.html")) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        f.write(page)
 
 
 def _blender_outputs(take, solved, stem: str, settings: BatchSettings) -> dict:
@@ -425,6 +453,12 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
                "jobs": settings.jobs if not settings.scheduler else workers, "scheduler": settings.scheduler,
                "settings": dataclasses.asdict(settings) | {"extra": None}, "takes_detail": rows}
     _write_summary(out_dir, summary)
+    if settings.html:
+        from .core.atomic import atomic_output
+        from .html_report import index_page
+
+        with atomic_output(os.path.join(out_dir, "index.html")) as tmp, open(tmp, "w", encoding="utf-8") as f:
+            f.write(index_page(rows, f"Batch: {os.path.abspath(out_dir)}"))
     bar.event("end", name=f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped")
     return summary
 
@@ -494,7 +528,8 @@ def _row(report: dict, skipped: bool) -> dict:
             "confident_share": round(summary["confident_share"], 4) if "confident_share" in summary else None,
             "uncertain_segments": len(summary.get("uncertain_segments", [])) if summary else None,
             "marker_rms_mm": hand.get("marker_rms_mm"),
-            "seconds": (report.get("seconds") or {}).get("total", 0.0)}
+            "seconds": (report.get("seconds") or {}).get("total", 0.0),
+            "page": report.get("name", "") + ".report.html" if "html" in report.get("outputs", {}) else None}
 
 
 def _write_summary(out_dir: str, summary: dict) -> None:

@@ -222,6 +222,8 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--hands", choices=("auto", "1", "2"), help="hands per take: found (auto, default) or forced")
     bat.add_argument("--hand-names", metavar="CONVENTION", help="how two hands' labels carry their side "
                                                                 "(see label --hand-names; default prefix, L_ThumbTip)")
+    bat.add_argument("--html", action="store_true", default=None,
+                     help="also an HTML page per take with pictures, and index.html linking them (needs matplotlib)")
     bat.add_argument("--force", action="store_true", default=None, help="redo takes whose outputs are complete")
     shown = bat.add_mutually_exclusive_group()
     shown.add_argument("--quiet", action="store_true", help="no progress, only the summary and errors")
@@ -692,7 +694,7 @@ def _batch(args) -> int:
         print(f"mocap_autolabel batch: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     for key in ("layout", "model", "method", "temporal", "validate", "confident", "solve_hand", "calibration",
-                "blend", "fbx", "bvh", "jobs", "scheduler", "force", "hands", "hand_names"):
+                "blend", "fbx", "bvh", "jobs", "scheduler", "html", "force", "hands", "hand_names"):
         value = getattr(args, key)
         if value is not None:
             setattr(settings, key, value)
@@ -713,6 +715,11 @@ def _batch(args) -> int:
         if importlib.util.find_spec("distributed") is None:
             print(f"error: {MISSING}", file=sys.stderr)
             return EXIT_FAILED
+    if settings.html and importlib.util.find_spec("matplotlib") is None:
+        from .html_report import MISSING as NO_MATPLOTLIB
+
+        print(f"error: {NO_MATPLOTLIB}", file=sys.stderr)
+        return EXIT_FAILED
     if settings.validate and settings.temporal != "vote":
         print("mocap_autolabel batch: error: --validate needs --temporal vote", file=sys.stderr)
         return EXIT_USAGE
