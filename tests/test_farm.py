@@ -8,29 +8,13 @@ from pathlib import Path
 
 import pytest
 from conftest import ROOT
+from helpers import same_outputs
 from mocap_autolabel.batch import BatchSettings, run_batch
 from mocap_autolabel.cli import main
 from test_batch import _synthetic
 
 pytest.importorskip("distributed", reason="Dask's distributed is not installed (pip install distributed)")
 import dask  # noqa: E402  (installed with distributed)
-
-
-def same_outputs(a: Path, b: Path) -> list[str]:
-    """The take outputs of two batch folders, compared: labeled C3Ds byte for byte, reports but for their timings.
-
-    Returns the names of the takes compared; asserts no hidden temporary file is left in either.
-    """
-    names = sorted(p.name[: -len(".labeled.c3d")] for p in a.glob("*.labeled.c3d"))
-    assert names == sorted(p.name[: -len(".labeled.c3d")] for p in b.glob("*.labeled.c3d"))
-    for name in names:
-        assert (a / f"{name}.labeled.c3d").read_bytes() == (b / f"{name}.labeled.c3d").read_bytes(), name
-        ra, rb = (json.loads((d / f"{name}.report.json").read_text()) for d in (a, b))
-        ra.pop("seconds"), rb.pop("seconds")
-        assert ra == rb, name
-    for folder in (a, b):
-        assert not [p.name for p in folder.rglob("*") if ".partial" in p.name]
-    return names
 
 
 @pytest.fixture(scope="module")

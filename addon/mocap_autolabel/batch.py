@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import errno
 import glob
 import io
 import json
@@ -208,6 +209,11 @@ def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) ->
         report["status"] = "ok"
     except MocapInputError as exc:
         report["error"] = str(exc)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EACCES, errno.EROFS):
+            report["error"] = f"{path}: unexpected {type(exc).__name__}: {exc}"
+        else:  # the disk is full, or the file too large for it, or the folder not writable
+            report["error"] = f"{path}: cannot write its outputs in {out_dir}: {exc.strerror}"
     except Exception as exc:  # one bad take must not stop the batch
         report["error"] = f"{path}: unexpected {type(exc).__name__}: {exc}"
     timings["total"] = round(time.perf_counter() - start, 4)

@@ -751,6 +751,10 @@ def _batch(args) -> int:
     except FarmError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILED
+    except OSError as exc:  # even a take's report or the summary cannot be written (a full disk)
+        print(f"error: {args.output}: cannot write ({exc.strerror or exc}); outputs written "
+              f"before are whole, a rerun redoes the rest", file=sys.stderr)
+        return EXIT_FAILED
     print(format_table(summary))
     print(f"  summary  {os.path.join(args.output, 'summary.csv')}, {os.path.join(args.output, 'summary.json')}")
     return EXIT_FAILED if summary["failed"] else EXIT_OK

@@ -55,8 +55,15 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
     if kind == "local":
         threads = str(threads_per_worker or max(1, (os.cpu_count() or 1) // int(where)))
         env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
-        with LocalCluster(n_workers=int(where), threads_per_worker=1, processes=True, dashboard_address=None,
-                          silence_logs=logging.ERROR, env=env) as cluster, Client(cluster) as client:
+        for attempt in range(TRIES):  # a worker process that dies while the cluster starts fails the start
+            try:
+                cluster = LocalCluster(n_workers=int(where), threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.ERROR, env=env)
+                break
+            except (RuntimeError, OSError, TimeoutError) as exc:
+                if attempt == TRIES - 1:
+                    raise FarmError(f"could not start a local Dask cluster of {where} workers: {exc}") from None
+        with cluster, Client(cluster) as client:
             yield client
         return
     try:
