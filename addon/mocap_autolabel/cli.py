@@ -8,6 +8,7 @@ Only the standard library is imported at module level, so this file also runs as
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import sys
@@ -215,9 +216,14 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--fbx", action="store_true", default=None, help="also write an FBX per take (solves the hand)")
     bat.add_argument("--bvh", action="store_true", default=None, help="also write a BVH per take (solves the hand)")
     bat.add_argument("--jobs", type=int, help="takes processed side by side (default 1)")
+    bat.add_argument("--scheduler", metavar="tcp://HOST:8786|local:N",
+                     help="each take a task on a Dask cluster: a farm's scheduler, or N local workers "
+                          "(pip install \"mocap_autolabel[farm]\")")
     bat.add_argument("--hands", choices=("auto", "1", "2"), help="hands per take: found (auto, default) or forced")
     bat.add_argument("--hand-names", metavar="CONVENTION", help="how two hands' labels carry their side "
                                                                 "(see label --hand-names; default prefix, L_ThumbTip)")
+    bat.add_argument("--html", action="store_true", default=None,
+                     help="also an HTML page per take with pictures, and index.html linking them (needs matplotlib)")
     bat.add_argument("--force", action="store_true", default=None, help="redo takes whose outputs are complete")
     shown = bat.add_mutually_exclusive_group()
     shown.add_argument("--quiet", action="store_true", help="no progress, only the summary and errors")
@@ -688,13 +694,32 @@ def _batch(args) -> int:
         print(f"mocap_autolabel batch: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     for key in ("layout", "model", "method", "temporal", "validate", "confident", "solve_hand", "calibration",
-                "blend", "fbx", "bvh", "jobs", "force", "hands", "hand_names"):
+                "blend", "fbx", "bvh", "jobs", "scheduler", "html", "force", "hands", "hand_names"):
         value = getattr(args, key)
         if value is not None:
             setattr(settings, key, value)
     if not 1 <= settings.jobs <= 64:
         print("mocap_autolabel batch: error: --jobs must be 1 to 64", file=sys.stderr)
         return EXIT_USAGE
+    if settings.scheduler:
+        from .farm import MISSING, FarmError, parse_scheduler
+
+        if args.jobs is not None and args.scheduler is not None:
+            print("mocap_autolabel batch: error: give --jobs or --scheduler, not both", file=sys.stderr)
+            return EXIT_USAGE
+        try:
+            parse_scheduler(settings.scheduler)
+        except FarmError as exc:
+            print(f"mocap_autolabel batch: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+        if importlib.util.find_spec("distributed") is None:
+            print(f"error: {MISSING}", file=sys.stderr)
+            return EXIT_FAILED
+    if settings.html and importlib.util.find_spec("matplotlib") is None:
+        from .html_report import MISSING as NO_MATPLOTLIB
+
+        print(f"error: {NO_MATPLOTLIB}", file=sys.stderr)
+        return EXIT_FAILED
     if settings.validate and settings.temporal != "vote":
         print("mocap_autolabel batch: error: --validate needs --temporal vote", file=sys.stderr)
         return EXIT_USAGE
@@ -719,7 +744,17 @@ def _batch(args) -> int:
         print(f"mocap_autolabel batch: error: no takes (.c3d, .trc, .tsv) in {' '.join(args.inputs)}", file=sys.stderr)
         return EXIT_USAGE
     progress = "none" if args.quiet else "json" if args.json_progress else "bar"
-    summary = run_batch(args.inputs, args.output, settings, progress)
+    from .farm import FarmError
+
+    try:
+        summary = run_batch(args.inputs, args.output, settings, progress)
+    except FarmError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except OSError as exc:  # even a take's report or the summary cannot be written (a full disk)
+        print(f"error: {args.output}: cannot write ({exc.strerror or exc}); outputs written "
+              f"before are whole, a rerun redoes the rest", file=sys.stderr)
+        return EXIT_FAILED
     print(format_table(summary))
     print(f"  summary  {os.path.join(args.output, 'summary.csv')}, {os.path.join(args.output, 'summary.json')}")
     return EXIT_FAILED if summary["failed"] else EXIT_OK

@@ -12,6 +12,7 @@ Writing: ezc3d, the reference implementation; the output round-trips through ezc
 
 from __future__ import annotations
 
+import errno
 import io
 import os
 import struct
@@ -400,3 +401,19 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     c["header"]["points"]["first_frame"] = max(int(take.first_frame) - 1, 0)
     with atomic_output(path) as tmp:
         c.write(tmp)
+        _check_written(tmp, path, n_f, n_p)
+
+
+def _check_written(tmp: str, path: str, n_frames: int, n_points: int) -> None:
+    """Raise OSError if ezc3d's write (which never reports a failed write) left ``tmp`` shorter than its data.
+
+    The header's DATA_START block (word 9) plus ``n_frames x n_points`` REAL samples of 16 bytes is the
+    least a whole file holds; a full disk or a file size limit leaves less.
+    """
+    size = os.path.getsize(tmp)
+    with open(tmp, "rb") as f:
+        header = f.read(18)
+    data_start = int.from_bytes(header[16:18], "little") if len(header) == 18 else 0
+    if data_start < 2 or size < (data_start - 1) * 512 + 16 * n_frames * n_points:
+        raise OSError(errno.EFBIG if size else errno.ENOSPC, "the file was cut short while writing (is the disk full?)",
+                      path)
