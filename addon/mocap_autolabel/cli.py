@@ -130,6 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--clean", action="store_true", help="no noise, occlusion, ghosts or merges")
     syn.add_argument("--hands", type=int, choices=(1, 2), default=1,
                      help="2: a left and a right hand that touch, clap, interlace and cross (default 1)")
+    syn.add_argument("--prop", type=int, default=0, metavar="N",
+                     help="with --hands 2: a rigid prop of N (3-6) markers held in the left hand (default none)")
     syn.add_argument("-o", "--output", required=True, metavar="OUT.c3d",
                      help="the take to write; the truth goes beside it as OUT.truth.npz")
     syn.add_argument("--blend", metavar="OUT.blend",
@@ -807,6 +809,9 @@ def _synth(args) -> int:
         return _fail(args.layout, exc)
     if args.hands == 2:
         return _synth_two(args, layout)
+    if args.prop:
+        print("mocap_autolabel synth: error: --prop needs --hands 2", file=sys.stderr)
+        return EXIT_USAGE
     config = dataclasses.replace(clean_config() if args.clean else SynthConfig(), rate=args.rate, side=args.side)
     synth = synthesize(layout, args.frames, seed=args.seed, config=config)
     try:
@@ -828,7 +833,7 @@ def _synth(args) -> int:
 def _synth_two(args, layout) -> int:
     """``synth --hands 2``: two interacting hands (left and right, sizes of their own)."""
     from .core.synth.generate import GHOST
-    from .core.synth.two_hands import save_two_hands, two_hand_take
+    from .core.synth.two_hands import TwoHandConfig, save_two_hands, two_hand_take
 
     if args.clean or args.side or args.blend:
         print("mocap_autolabel synth: error: --hands 2 takes no --clean, --side or --blend", file=sys.stderr)
@@ -836,9 +841,13 @@ def _synth_two(args, layout) -> int:
     if args.frames < 1:
         print(f"mocap_autolabel synth: error: --frames must be positive, got {args.frames}", file=sys.stderr)
         return EXIT_USAGE
-    two = two_hand_take(layout, args.frames, seed=args.seed, rate=args.rate)
+    if args.prop and not 3 <= args.prop <= 6:
+        print(f"mocap_autolabel synth: error: --prop takes 3 to 6 markers, got {args.prop}", file=sys.stderr)
+        return EXIT_USAGE
+    config = TwoHandConfig(prop_markers=args.prop)
+    two = two_hand_take(layout, args.frames, seed=args.seed, config=config, rate=args.rate)
     try:
-        take_path, truth = save_two_hands(two, args.output)
+        take_path, truth = save_two_hands(two, args.output, config)
     except OSError as exc:
         print(f"error: {args.output}: cannot write ({exc.strerror or exc})", file=sys.stderr)
         return EXIT_FAILED
@@ -846,6 +855,9 @@ def _synth_two(args, layout) -> int:
     print(f"{take_path}: two hands of {layout.name} ({2 * len(layout)} markers), {args.frames} frames at "
           f"{args.rate:g} Hz ({sizes}), hands within 5 cm in {100 * (two.gap < 0.05).mean():.0f} % of frames, "
           f"{two.take.n_points} slots, {(two.labels == GHOST).sum() / args.frames:.2f} ghosts per frame")
+    if len(two.prop_slots):
+        print(f"  prop     {len(two.prop_slots)} markers in the left hand, slots "
+              f"{', '.join(two.take.names[s] for s in two.prop_slots)} (ghosts in the truth)")
     print(f"  truth    {truth}")
     return EXIT_OK
 
