@@ -522,6 +522,9 @@ def _label(args) -> int:
     hands = _hands_line(labeling)
     if hands:
         print(f"  hands    {hands}")
+    for prop in labeling.info.get("props", []):
+        print(f"  prop     a rigid prop ({prop['trajectories']} trajectories, frames {prop['frames'][0]}-"
+              f"{prop['frames'][1] - 1}) took hand labels: kept out of the hands, its points left unlabeled")
     for line in missed:
         print(f"  warning  {line}")
     if args.method == "gmm" and not args.fit:

@@ -231,7 +231,8 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
         layout: the layout of one hand (M markers).
         hands: ``"auto"``, or 1 / 2 to force the count (a take with one hand where two are forced
             still gets one: ``info["forced"]`` says so).
-        ignore: optional bool ``(P,)``: slots kept out of every hand (named body markers).
+        ignore: optional bool ``(P,)``: slots kept out of every hand (named body markers), or
+            ``(F, P)``: samples kept out (a prop's trajectories).
 
     Returns:
         :class:`Hands`.
@@ -242,7 +243,7 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
     m = len(layout)
     valid = take.valid.copy()
     if ignore is not None:
-        valid[:, ignore] = False
+        valid &= ~(ignore if ignore.ndim == 2 else ignore[None, :])
     frames, points = valid.shape
     pos = np.where(valid[..., None], take.positions, np.nan).astype(np.float64)
     one = Hands(1, np.where(valid, 0, -1).astype(np.int8), np.zeros_like(valid), np.full((frames, 2, 3), np.nan),

@@ -23,6 +23,7 @@ from .labelers import METHODS, FrameBatch, Labeler, make_labeler, pack_frames
 from .labelers.assign import assign, row_log_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
 from .layout import Layout
+from .props import Prop, find_props, prop_mask, rigid_parts
 from .take import Take
 from .temporal.confidence import (
     load_calibration,
@@ -389,7 +390,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                progress: Callable[[str], None] | None = None,
                done: Callable[[float], None] | None = None, hands: str | int = "auto",
                sides: Sequence[str] | None = None, naming: HandNaming | str | None = None,
-               keep_named: bool = True) -> Labeling:
+               keep_named: bool = True, props: bool = True, exclude: np.ndarray | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -441,11 +442,16 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             always get one (default ``L_``/``R_`` prefixes); one hand keeps plain names unless given.
         keep_named: points the file already names that are not ``layout``'s markers (a labeled
             body, a named prop) are kept out of the hands and stay null; False offers them too.
+        props: look for rigid props among the trajectories (:mod:`.props`): a rigid group that
+            took labels but is no rigid part of a hand is kept out and the take labeled again;
+            ``info["props"]`` lists them.
+        exclude: bool ``(F, P)``: samples kept out of the hands (null), e.g. a prop's.
 
     Returns:
         the :class:`Labeling`; ``info`` holds the settings and the time of each stage, and
         ``info["hands"]`` the hands found (count, sides with their evidence).
     """
+    args = dict(locals())  # to label again without the props found
     if method not in METHODS:
         raise ValueError(f"unknown labeling method {method!r}; choose one of {', '.join(METHODS)}")
     if temporal not in TEMPORAL:
@@ -469,6 +475,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
 
     naming = HandNaming(naming) if isinstance(naming, str) else naming
     ignore = other_named_points(take, layout, naming) if keep_named else None
+    if exclude is not None:
+        ignore = exclude | (False if ignore is None else ignore[None, :])
     say("finding hands")
     found = _hands(take, layout, hands, ignore)
     times["hands"] = time.perf_counter() - t0
@@ -489,7 +497,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     t = time.perf_counter()
     say("packing frames")
     if ignore is not None and ignore.any():
-        take_in = replace_valid(take, valid & ~ignore[None, :])
+        take_in = replace_valid(take, valid & ~(ignore if ignore.ndim == 2 else ignore[None, :]))
     else:
         take_in = take
     batch = _pack(take_in, _cap(layout) * found.count)
@@ -610,10 +618,39 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                 single.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
                 share(1.0)
                 return single
+    if props and temporal == "vote":
+        t = time.perf_counter()
+        found_props = _props(take, tracklets, labeling, hand_labels)
+        times["props"] = time.perf_counter() - t
+        if found_props:
+            say(f"labeling again without {len(found_props)} rigid prop(s)")
+            again = label_take(**{**args, "props": False,
+                                  "exclude": prop_mask(found_props, take.n_frames, take.n_points)
+                                  | (False if exclude is None else exclude)})
+            again.info["props"] = [p.as_dict() for p in found_props]
+            again.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
+            share(1.0)
+            return again
     share(1.0)
     times["total"] = time.perf_counter() - t0
     info["seconds"] = {key: round(v, 4) for key, v in times.items()}
     return labeling
+
+
+def _props(take: Take, tracklets, labeling: Labeling, labels: _HandLabels) -> list[Prop]:
+    """The rigid props of a labeled take (:func:`.props.find_props`), judged by the labels its
+    trajectories mostly took."""
+    per = labeling.per_sample()
+    ids = tracklets.id_map(take.n_frames, take.n_points)
+    f, p = np.nonzero(ids >= 0)
+    n_labels = len(labels)
+    votes = np.bincount(ids[f, p].astype(np.int64) * (n_labels + 1) + (per[f, p].astype(np.int64) + 1),
+                        minlength=len(tracklets) * (n_labels + 1)).reshape(len(tracklets), n_labels + 1)
+    tracklet_label = votes.argmax(axis=1) - 1
+    one = rigid_parts(rigid_pairs(labels.layout).pairs, labels.m)
+    parts = np.concatenate([one + h * (one.max() + 1) for h in range(labels.hands)])
+    positions = np.where(take.valid[..., None], take.positions, np.nan)
+    return find_props(positions, tracklets, take.rate, tracklet_label, parts)
 
 
 def score_samples(scores: np.ndarray, batch: FrameBatch, rows: np.ndarray | None = None,
