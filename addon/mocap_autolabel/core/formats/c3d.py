@@ -24,12 +24,10 @@ import numpy as np
 from ... import __version__
 from ..atomic import atomic_output
 from ..errors import MocapInputError
-from ..take import Take, drop_damaged, mark_missing, unit_scale
+from ..take import MAX_RATE, Take, mark_missing, to_metres, unit_scale
 
 BLOCK = 512
 MAGIC = 0x50
-#: Rates at or above this many frames per second are damage, not a capture system's.
-MAX_RATE = 1e6
 #: Frames converted per chunk: bounds the temporary memory of a read.
 CHUNK_FRAMES = 8192
 
@@ -92,11 +90,7 @@ def read_c3d(path: str | os.PathLike) -> Take:
     if not units:
         units = _guess_units(positions)
         take_warnings.append(f"no POINT:UNITS parameter; the values look like {units}")
-    scale_m = unit_scale(units, path)
-    with np.errstate(over="ignore"):  # a huge value becomes inf, then a missing sample
-        positions *= scale_m
-        residuals *= scale_m
-    damaged = drop_damaged(positions, residuals)
+    damaged = to_metres(positions, unit_scale(units, path), residuals)
     take_warnings += [damaged] if damaged else []
 
     names = _point_labels(reader, layout.n_points)
