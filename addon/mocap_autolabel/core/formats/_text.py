@@ -64,7 +64,7 @@ def marker_count(stated: list[tuple[str, str | None]], names: list[str], rows: l
         The count to read, the names padded with ``*N`` or cut to it, and a warning line ("" when
         everything agrees). A count that the rows hold exactly wins, then one they have room for,
         the header's first; when the rows hold none of them, the header's is returned and the
-        table's own check names the short row.
+        table's own check names the short row. Without data rows, the names' count is read.
     """
     counts: dict[int, list[str]] = {}
     for who, text in [*stated, ("the marker names", str(len(names)))]:
@@ -77,15 +77,16 @@ def marker_count(stated: list[tuple[str, str | None]], names: list[str], rows: l
     if not counts:
         counts[len(names)] = ["the marker names"]
     first_row = next((r for r in rows if r.strip()), None)
-    held = None if first_row is None else (len(first_row.split("\t")) - first_col) // 3
-    fitting = [n for n in counts if held is None or n <= held]
+    # No data row: nothing to check a count against, and no marker beyond the names to make up.
+    held = len(names) if first_row is None else (len(first_row.split("\t")) - first_col) // 3
+    fitting = [n for n in counts if n <= held]
     exact = [n for n in fitting if n == held]
     n = (exact or fitting or list(counts))[0]
     names = names[:n] + [f"*{i}" for i in range(len(names), n)]
     if len(counts) < 2:
         return n, names, ""
     claims = ", ".join(f"{value} in {' and '.join(who)}" for value, who in counts.items())
-    rest = f"; the data rows hold {held}" if held is not None else ""
+    rest = f"; the data rows hold {held}" if first_row is not None else ""
     return n, names, f"marker count disagrees: {claims}{rest}; read {n} (unnamed markers as *N)"
 
 

@@ -12,6 +12,7 @@ Writing: ezc3d, the reference implementation; the output round-trips through ezc
 
 from __future__ import annotations
 
+import collections
 import io
 import itertools
 import os
@@ -96,7 +97,7 @@ def read_c3d(path: str | os.PathLike) -> Take:
     names = _point_labels(reader, layout.n_points)
     if layout.n_points == 0:
         take_warnings.append("the file holds no 3D points (analog data only)")
-    dupes = sorted({n for n in names if n and names.count(n) > 1})
+    dupes = sorted(n for n, count in collections.Counter(names).items() if n and count > 1)
     if dupes:
         take_warnings.append(f"duplicate point names: {', '.join(dupes[:5])}" + (" ..." if len(dupes) > 5 else ""))
 
@@ -145,7 +146,7 @@ def rebuild_parameter_section(meta: bytes) -> tuple[bytes, list[str]]:
         if n_chars == 0 or group_id == 0:
             break
         name_end = pos + 2 + abs(n_chars)
-        name = meta[pos + 2:name_end].decode("latin-1").strip()
+        name = _printable(meta[pos + 2:name_end].decode("latin-1").strip())
         offset = struct.unpack_from(endian + "h", meta, name_end)[0]
         body_end = name_end + offset if offset > 0 else end
         body = bytearray(meta[name_end + 2:min(body_end, end)])
@@ -236,7 +237,13 @@ def _string_param(reader, key: str) -> str:
         value = p.string_value if len(p.dimensions) <= 1 else " ".join(p.string_array.ravel())
     except Exception:
         return ""
-    return str(value).strip().strip("\x00").strip()
+    return _printable(str(value).strip().strip("\x00").strip())
+
+
+def _printable(text: str) -> str:
+    """``text`` with every control character (a newline in a damaged name) shown as "?": names
+    and units go into one-line messages and Blender object names."""
+    return text if text.isprintable() else "".join(c if c.isprintable() else "?" for c in text)
 
 
 def _number_param(reader, key: str) -> float | None:
@@ -279,7 +286,7 @@ def _point_labels(reader, n_points: int) -> list[str]:
                 break
             continue
         try:
-            names.extend(str(s).strip() for s in np.atleast_1d(p.string_array))
+            names.extend(_printable(str(s).strip()) for s in np.atleast_1d(p.string_array))
         except Exception:
             break
     names = names[:n_points]
@@ -315,7 +322,7 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
     starts = _stated(("the header", header.data_block if header.data_block > 1 else None),
                      ("POINT:DATA_START", _number_param(reader, "POINT:DATA_START")), minimum=2)
     if not starts:
-        starts = [("default", 2)]
+        starts = [(2, "the default")]
     # The header's frame fields are 16 bits: a range of 65535 frames or a wrapped one is no count.
     header_frames = int(header.last_frame) - int(header.first_frame) + 1
     frames = _stated(("the header's first/last frame",
