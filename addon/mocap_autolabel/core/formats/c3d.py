@@ -339,11 +339,13 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
         available = max(space, 0) // frame_bytes if frame_bytes else 0
         for n_frames, _ in frames or [(available, "")]:
             rank = _fit(space, n_frames, frame_bytes)
-            choice = (rank, n_points, is_real, start, n_frames, available)
+            # Among layouts that leave data unread, the one that reads the most.
+            key = (rank, space - n_frames * frame_bytes if rank == 2 else 0)
+            choice = (key, n_points, is_real, start, n_frames, available)
             first = first or choice
-            if best is None or rank < best[0]:
+            if best is None or key < best[0]:
                 best = choice
-    rank, n_points, is_real, start, n_frames, available = best
+    (rank, _), n_points, is_real, start, n_frames, available = best
     if rank == 3:
         _, n_points, is_real, start, n_frames, available = first
         raise MocapInputError(
@@ -366,14 +368,15 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
 def _fit(space: int, n_frames: int, frame_bytes: int) -> int:
     """How well ``n_frames`` frames of ``frame_bytes`` fill ``space`` bytes: 0 the data holds
     exactly that many whole frames, 1 the rest is under a block (padding), 2 they fit with more
-    after them, 3 they do not fit (or the data starts past the end of the file)."""
+    after them, 3 they do not fit (or the data starts past the end of the file). Zero frames, or
+    frames of no bytes, are never exact: they say nothing about the data."""
     if space < 0:
         return 3
     rest = space - n_frames * frame_bytes
     if rest < 0:
         return 3
-    if not frame_bytes:
-        return 1  # nothing to check against: no points and no analog words
+    if not frame_bytes or not n_frames:
+        return 1 if rest < BLOCK else 2  # nothing to check against, or no frame read from a data section
     return 0 if rest < frame_bytes else 1 if rest < BLOCK else 2
 
 
