@@ -378,16 +378,17 @@ def truncations(seeds: list[Seed], data_blocks: int = 8) -> list[tuple[Seed, int
     return cuts
 
 
-def cases(seeds: list[Seed], n: int, master_seed: int = 0, start: int = 0,
+def cases(seeds: list[Seed], n: int, master_seed: int = 0, start: int = 0, step: int = 1,
           systematic: bool = True) -> Iterator[Case]:
-    """Cases ``start`` .. ``n - 1``: first the truncations (when ``systematic``), then random
-    mutations, a third of them on each format (C3D, TRC, TSV) where the seeds have it."""
+    """Cases ``start``, ``start + step``, ... below ``n``: first the truncations (when
+    ``systematic``), then random mutations, a third of them on each format (C3D, TRC, TSV)
+    where the seeds have it."""
     cuts = truncations(seeds) if systematic else []
     by_ext: dict[str, list[Seed]] = {}
     for seed in seeds:
         by_ext.setdefault(seed.ext, []).append(seed)
     formats = sorted(by_ext)
-    for index in range(start, n):
+    for index in range(start, n, step):
         if index < len(cuts):
             seed, cut = cuts[index]
             yield Case(index, seed, (f"truncate: cut at byte {cut} (a block or line boundary)",), seed.data[:cut])
