@@ -84,3 +84,21 @@ def test_a_rate_that_is_no_rate_is_one_clear_error(tmp_path, rate):
     path = _patched(tmp_path, data_path(*TRC), "120\t120\t27", f"{rate}\t{rate}\t27")
     with pytest.raises(MocapInputError, match="no usable frame rate"):
         read_take(path)
+
+
+def test_trc_damage_that_no_count_explains(tmp_path):
+    """Found by the fuzzer: a frame number Blender cannot key, and a huge NumMarkers with the names
+    line gone (it made 2^31 names)."""
+    src = data_path(*TRC)
+    take = read_take(_patched(tmp_path, src, "\n0\t0\t", "\n99999999999999999999\t0\t"))
+    assert take.first_frame == 1
+    assert take.warnings == ["first frame number '99999999999999999999' is not a frame number; frames numbered "
+                             "from 1"]
+    lines = src.read_text().splitlines()
+    lines[2] = lines[2].replace("\t27\t19\t", "\t27\t2147483648\t")
+    del lines[3]
+    path = tmp_path / "no_names.trc"
+    path.write_text("\n".join(lines))
+    with pytest.raises(MocapInputError, match="the first data row holds 19 markers but the header states more "
+                                              r"\(2147483648 in NumMarkers, 57 in the marker names\)"):
+        read_take(path)

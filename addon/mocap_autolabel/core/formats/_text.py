@@ -50,7 +50,11 @@ def marker_table(path: str, rows: list[str], first_col: int, n_markers: int) -> 
     return table[:, first_col:].reshape(len(table), n_markers, 3)
 
 
-def marker_count(stated: list[tuple[str, str | None]], names: list[str], rows: list[str],
+#: The largest first frame number read from a file (Blender's last frame is 1,048,574).
+MAX_FIRST_FRAME = 1_000_000
+
+
+def marker_count(path: str, stated: list[tuple[str, str | None]], names: list[str], rows: list[str],
                  first_col: int) -> tuple[int, list[str], str]:
     """Resolve how many markers a table holds when its header, its names and its rows disagree.
 
@@ -63,8 +67,10 @@ def marker_count(stated: list[tuple[str, str | None]], names: list[str], rows: l
     Returns:
         The count to read, the names padded with ``*N`` or cut to it, and a warning line ("" when
         everything agrees). A count that the rows hold exactly wins, then one they have room for,
-        the header's first; when the rows hold none of them, the header's is returned and the
-        table's own check names the short row. Without data rows, the names' count is read.
+        the header's first. Without data rows, the names' count is read.
+
+    Raises:
+        MocapInputError: the first data row holds fewer markers than every stated count.
     """
     counts: dict[int, list[str]] = {}
     for who, text in [*stated, ("the marker names", str(len(names)))]:
@@ -78,14 +84,17 @@ def marker_count(stated: list[tuple[str, str | None]], names: list[str], rows: l
         counts[len(names)] = ["the marker names"]
     first_row = next((r for r in rows if r.strip()), None)
     # No data row: nothing to check a count against, and no marker beyond the names to make up.
-    held = len(names) if first_row is None else (len(first_row.split("\t")) - first_col) // 3
+    held = len(names) if first_row is None else max(len(first_row.split("\t")) - first_col, 0) // 3
     fitting = [n for n in counts if n <= held]
     exact = [n for n in fitting if n == held]
-    n = (exact or fitting or list(counts))[0]
+    claims = ", ".join(f"{value} in {' and '.join(who)}" for value, who in counts.items())
+    if not fitting:
+        raise MocapInputError(path, f"malformed marker table: the first data row holds {held} markers "
+                                    f"but the header states more ({claims})")
+    n = (exact or fitting)[0]
     names = names[:n] + [f"*{i}" for i in range(len(names), n)]
     if len(counts) < 2:
         return n, names, ""
-    claims = ", ".join(f"{value} in {' and '.join(who)}" for value, who in counts.items())
     rest = f"; the data rows hold {held}" if first_row is not None else ""
     return n, names, f"marker count disagrees: {claims}{rest}; read {n} (unnamed markers as *N)"
 
@@ -126,9 +135,19 @@ def frame_rate(path: str, *stated: tuple[str, str | None]) -> float:
     raise MocapInputError(path, f"no usable frame rate ({said}; expected a number of frames per second above 0)")
 
 
-def first_frame_number(row: str) -> int:
-    """The frame number in a data row's first column; 1 when it is not a number."""
+def first_frame_number(rows: list[str]) -> tuple[int, str]:
+    """The frame number in the first data row's first column, and a warning line ("" if none).
+
+    A number that is not a whole number from 0 to ``MAX_FIRST_FRAME`` is damage (no capture
+    numbers its frames so, and Blender's timeline ends near there): frames are numbered from 1.
+    """
+    if not rows:
+        return 1, ""
+    text = rows[0].split("\t", 1)[0].strip()
     try:
-        return int(float(row.split("\t", 1)[0]))
-    except (ValueError, OverflowError):
-        return 1
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if 0 <= value <= MAX_FIRST_FRAME and value == int(value):
+        return int(value), ""
+    return 1, f"first frame number {text[:20]!r} is not a frame number; frames numbered from 1"

@@ -40,7 +40,7 @@ def read_qtm_tsv(path: str | os.PathLike) -> Take:
         first_col = 2 if len(columns) > 1 and columns[1].strip() == "Time" else 1
         row += 1
     rows = lines[row:]
-    n_markers, names, note = marker_count([("NO_OF_MARKERS", _first(header, "NO_OF_MARKERS"))], named, rows,
+    n_markers, names, note = marker_count(path, [("NO_OF_MARKERS", _first(header, "NO_OF_MARKERS"))], named, rows,
                                           first_col)
     positions = marker_table(path, rows, first_col, n_markers)
     data = [r for r in rows if r.strip()]
@@ -48,15 +48,16 @@ def read_qtm_tsv(path: str | os.PathLike) -> Take:
     notes = [note, frame_count_note("NO_OF_FRAMES", _first(header, "NO_OF_FRAMES"), len(data), numbers)]
     mark_missing(positions)
     notes.append(to_metres(positions, unit_scale(QTM_UNITS, path)))
+    first_frame, note = first_frame_number(data) if first_col else (1, "")
     return Take(
         positions=positions,
         names=names,
         rate=rate,
-        first_frame=first_frame_number(data[0]) if first_col and data else 1,
+        first_frame=first_frame,
         source_units=QTM_UNITS,
         source=path,
         vendor="Qualisys (TSV)",
-        warnings=[n for n in notes if n],
+        warnings=[n for n in [*notes, note] if n],
     )
 
 

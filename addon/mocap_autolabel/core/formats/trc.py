@@ -28,22 +28,23 @@ def read_trc(path: str | os.PathLike) -> Take:
     units = header.get("Units", "mm")
     rows = lines[5:]
     named = _names(lines[3])
-    n_markers, names, note = marker_count([("NumMarkers", header["NumMarkers"])], named, rows, 2)
+    n_markers, names, note = marker_count(path, [("NumMarkers", header["NumMarkers"])], named, rows, 2)
     positions = marker_table(path, rows, 2, n_markers)
     data = [r for r in rows if r.strip()]
     notes = [note, frame_count_note("NumFrames", header.get("NumFrames"), len(data),
                                     [r.split("\t", 1)[0] for r in data[:1] + data[-1:]])]
     mark_missing(positions)
     notes.append(to_metres(positions, unit_scale(units, path)))
+    first_frame, note = first_frame_number(data)
     return Take(
         positions=positions,
         names=names,
         rate=rate,
-        first_frame=first_frame_number(data[0]) if data else 1,
+        first_frame=first_frame,
         source_units=units,
         source=path,
         vendor="TRC",
-        warnings=[n for n in notes if n],
+        warnings=[n for n in [*notes, note] if n],
     )
 
 
