@@ -308,8 +308,8 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
     format (the sign of POINT:SCALE), the data start (POINT:DATA_START) and the frame count
     (POINT:FRAMES, TRIAL:ACTUAL_START/END_FIELD). Every combination of the stated values is
     checked against the size of the data section (see :func:`_fit`); among equals the header's
-    values win, as they define the layout of a standard file. Only
-    when no combination fits in the file is it refused (truncated).
+    values win, as they define the layout of a standard file. Only when no combination fits in
+    the file is it refused (truncated). The analog words per frame are the header's alone.
     """
     header = reader.header
     processor = {"INTEL": "Intel", "DEC": "DEC", "MIPS": "MIPS"}.get(reader._dtypes.proc_type, "Intel")
