@@ -150,3 +150,20 @@ def test_a_header_and_parameters_that_all_overrun_the_data_are_refused(tmp_path)
     with pytest.raises(MocapInputError, match="truncated: the header declares 580 frames but the data "
                                               "section holds only 579"):
         read_c3d(cut)
+
+
+def test_an_integer_files_scale_that_disagrees_is_read_with_point_scale_as_ezc3d_does(tmp_path):
+    src = data_path("c3d", "io_anim_c3d/test/testfiles/sample01/Eb015pi.c3d")  # Intel INT, POINT:SCALE 0.0833
+    data = bytearray(src.read_bytes())
+    struct.pack_into("<f", data, 12, 0.5)  # the header's scale
+    patched = tmp_path / "scale.c3d"
+    patched.write_bytes(bytes(data))
+    take = read_c3d(patched)
+    np.testing.assert_array_equal(take.positions, read_c3d(src).positions)
+    assert take.warnings == ["POINT:SCALE (0.0833333) and the header's scale (0.5) disagree; read with POINT:SCALE"]
+    ezc3d = pytest.importorskip("ezc3d")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = ezc3d.c3d(str(patched))["data"]["points"][:3].transpose(2, 1, 0) / 1000.0  # mm
+    valid = ~np.isnan(take.positions)
+    assert np.abs(take.positions[valid] - ref[valid]).max() < 1e-6
