@@ -103,7 +103,9 @@ def _report(tally: fuzzing.Tally, seeds, n_cuts: int, args, wall: float) -> str:
         "on one line), a warning that escapes the reader (numpy's included), a Take with an infinite "
         f"coordinate, a bad shape or rate, more than {fuzzing.TIME_LIMIT_S:g} s, or a growth of the "
         f"process's peak resident memory (VmHWM, reset before each case) over {fuzzing.MEMORY_BOUND_MB:g} "
-        "MB, the bound stated here.",
+        f"MB, the bound stated here. Each process's address space is capped at its size at the start plus "
+        f"{ADDRESS_SPACE_GB} GB (RLIMIT_AS), so that an allocation sized by an absurd count fails as a case "
+        "(MemoryError) instead of swapping the machine.",
         "",
         "| cases | read | clean errors | failures |",
         "|---:|---:|---:|---:|",
