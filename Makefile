@@ -61,6 +61,7 @@ bench: $(VENV)/.extras-$(BENCH_EXTRAS)
 	$(BIN)/python benchmarks/validation.py
 	$(BIN)/python benchmarks/batch.py
 	$(BIN)/python benchmarks/review.py
+	$(BIN)/python benchmarks/fuzz.py
 
 ## models: retrain every shipped model (set, perm, cnn for han19 and glove13), seeded, then recalibrate
 ## the segment confidences; about 1.5 hours on 2 cores
