@@ -1,24 +1,38 @@
-# mocap_autolabel: every target sets up its own virtual environment first.
+# mocap_autolabel: every target sets up its own virtual environment first, with only the extras it needs
+# (pyproject.toml): nothing here but `make models` and `make test` installs PyTorch or ONNX tooling.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed
+
+# What each target installs on top of the package (numpy, scipy, onnxruntime, ezc3d, c3d):
+DEMO_EXTRAS  := blender
+LINT_EXTRAS  := dev
+# make test (what CI runs) installs every extra a test needs, so that no test skips in CI.
+TEST_EXTRAS  := blender,dev,farm,report,train
+BENCH_EXTRAS := blender,bench
+TRAIN_EXTRAS := train
+EXT_EXTRAS   := blender
 
 .PHONY: venv demo test lint bench extension sample models clean test-bpy42
 
-$(STAMP): pyproject.toml
+$(VENV)/.created:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e ".[blender,dev,train]"
-	touch $(STAMP)
+	touch $@
 
-venv: $(STAMP)
+# One stamp per set of extras; a change to pyproject.toml installs again.
+$(VENV)/.extras-%: pyproject.toml | $(VENV)/.created
+	$(BIN)/python -m pip install -q -e ".[$*]"
+	touch $@
+
+## venv: the package with the bpy module (what make demo uses)
+venv: $(VENV)/.extras-$(DEMO_EXTRAS)
 
 ## demo: the bundled raw synthetic take -> labels (set + trajectory voting, C3D + report) and a review scene
 ## (labeled markers keyed by confidence + the solved hand) -> a calibrated, solved hand rig (.blend, FBX, BVH,
 ## report); also the raw take alone and beside the hand that made it; then a synthetic take of two interacting hands,
 ## labeled (L_/R_ names, scored against its truth) into a review scene with both solved hands
-demo: venv
+demo: $(VENV)/.extras-$(DEMO_EXTRAS)
 	$(BIN)/python -m mocap_autolabel info samples/demo_take.c3d
 	$(BIN)/python -m mocap_autolabel label samples/demo_take.c3d --layout han19 -o out/demo_labeled.c3d --report out/demo_report.json --blend out/demo_review.blend --solve-hand
 	$(BIN)/python -m mocap_autolabel info out/demo_labeled.c3d
@@ -30,15 +44,14 @@ demo: venv
 	@echo "demo: open out/demo_review.blend in Blender with the add-on (Mocap tab > Review: labels coloured by confidence + the solved hand), out/demo_hand.blend (solved rig), out/demo.blend (the raw take), out/demo_truth.blend (raw take + the true hand) and out/demo_two_hands_review.blend (two hands: Left hand / Right hand labels + Hand_L / Hand_R)"
 
 ## test: ruff, then every test (real-data tests skip when ../shared/data is absent)
-test: venv lint
+test: $(VENV)/.extras-$(TEST_EXTRAS) lint
 	$(BIN)/python -m pytest
 
-lint: venv
+lint: $(VENV)/.extras-$(LINT_EXTRAS)
 	$(BIN)/ruff check .
 
 ## bench: speed and memory reports under benchmarks/reports/
-bench: venv
-	$(BIN)/python -m pip install -q -e ".[bench]"
+bench: $(VENV)/.extras-$(BENCH_EXTRAS)
 	$(BIN)/python benchmarks/import_speed.py
 	$(BIN)/python benchmarks/synth_speed.py
 	$(BIN)/python benchmarks/synth_realism.py
@@ -48,19 +61,21 @@ bench: venv
 	$(BIN)/python benchmarks/validation.py
 	$(BIN)/python benchmarks/batch.py
 	$(BIN)/python benchmarks/review.py
+	$(BIN)/python benchmarks/fuzz.py
 
 ## models: retrain every shipped model (set, perm, cnn for han19 and glove13), seeded, then recalibrate
 ## the segment confidences; about 1.5 hours on 2 cores
-models: venv
+models: $(VENV)/.extras-$(TRAIN_EXTRAS)
 	$(BIN)/python -m training --all
 	$(BIN)/python -m training.confidence
 
 ## extension: one validated Blender extension zip per platform in dist/
-extension: venv
+extension: $(VENV)/.extras-$(EXT_EXTRAS)
 	$(BIN)/python tools/build_extension.py --output-dir dist
 
 ## sample: regenerate the bundled demo take and its truth (deterministic, byte for byte)
-sample: venv
+sample: $(VENV)/.created
+	$(BIN)/python -m pip install -q -e .
 	$(BIN)/python -m mocap_autolabel synth --layout han19 --frames 1200 --seed 1 -o samples/demo_take.c3d
 
 clean:

@@ -45,3 +45,76 @@ def select(bpy, *objs):
     for o in objs:
         o.select_set(True)
     bpy.context.view_layer.objects.active = objs[0] if objs else None
+
+
+# --- batch runs: outputs compared, workers killed ---
+
+def same_outputs(a, b) -> list[str]:
+    """The take outputs of two batch folders (paths), compared: labeled C3Ds byte for byte, reports but for
+    their timings. Returns the names of the takes compared; asserts no temporary file is left in either."""
+    import json
+    from pathlib import Path
+
+    a, b = Path(a), Path(b)
+    names = sorted(p.name[: -len(".labeled.c3d")] for p in a.glob("*.labeled.c3d"))
+    assert names == sorted(p.name[: -len(".labeled.c3d")] for p in b.glob("*.labeled.c3d"))
+    for name in names:
+        assert (a / f"{name}.labeled.c3d").read_bytes() == (b / f"{name}.labeled.c3d").read_bytes(), name
+        ra, rb = (json.loads((d / f"{name}.report.json").read_text()) for d in (a, b))
+        ra.pop("seconds"), rb.pop("seconds")
+        assert ra == rb, name
+    for folder in (a, b):
+        assert not [p.name for p in folder.rglob("*") if ".partial" in p.name]
+    return names
+
+
+def worker_processes() -> list[int]:
+    """Process ids of this process's children started by multiprocessing's spawn (pool and Dask workers)."""
+    import os
+
+    me, found = os.getpid(), []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                cmd = f.read()
+        except (OSError, ValueError, IndexError):
+            continue
+        if ppid == me and b"spawn_main" in cmd:
+            found.append(int(entry))
+    return found
+
+
+def run_killing_a_worker(run, delay: float, rng) -> tuple[object, bool]:
+    """``run()`` (a batch run in this process) while, ``delay`` seconds in, one of its worker processes
+    (chosen by ``rng``) is killed with SIGKILL. Returns what ``run`` returned and whether one was killed."""
+    import os
+    import signal
+    import threading
+    import time
+
+    stop = threading.Event()
+    killed = []
+
+    def killer():
+        if stop.wait(delay):
+            return
+        while not stop.is_set():
+            pids = worker_processes()
+            if pids:
+                os.kill(int(rng.choice(pids)), signal.SIGKILL)
+                killed.append(True)
+                return
+            time.sleep(0.02)
+
+    thread = threading.Thread(target=killer, daemon=True)
+    thread.start()
+    try:
+        result = run()
+    finally:
+        stop.set()
+        thread.join()
+    return result, bool(killed)

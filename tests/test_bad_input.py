@@ -74,11 +74,27 @@ def test_parameter_section_past_the_end(good_c3d, tmp_path):
 
 
 def test_absurd_point_count_is_an_error_not_a_huge_allocation(good_c3d, tmp_path):
+    """60,000 points in the header and in POINT:USED: no layout fits the data, nothing is allocated.
+    (60,000 in the header alone is a disagreement that POINT:USED resolves: see test_c3d_corpus.)"""
     data = bytearray(good_c3d.read_bytes())
     data[2:4] = (60000).to_bytes(2, "little")  # header point count
+    used = _parameter_value_offset(data, b"USED", 6)
+    data[used:used + 2] = (60000).to_bytes(2, "little")
     path = tmp_path / "huge.c3d"
     path.write_bytes(bytes(data))
     assert "truncated" in _error(path)
+
+
+def _parameter_value_offset(data: bytes, name: bytes, value: int) -> int:
+    """Byte offset of the 16-bit value ``value`` of an Intel parameter ``name`` (locked or not) that has
+    no dimensions."""
+    at = 512
+    while True:
+        at = data.index(name, at + 1)
+        start = at + len(name) + 4  # 2 bytes offset to the next record, type, number of dimensions
+        named = data[at - 2] in (len(name), 256 - len(name))
+        if named and data[start - 1] == 0 and data[start:start + 2] == value.to_bytes(2, "little"):
+            return start
 
 
 def test_missing_unknown_and_folder(tmp_path):

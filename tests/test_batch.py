@@ -185,7 +185,8 @@ def _readme_batch_examples() -> tuple[str, list[str]]:
     section = text[text.index("## Batch runs"):]
     toml = section[section.index("```toml\n") + len("```toml\n"):]
     toml = toml[:toml.index("```")]
-    commands = [line.split("#")[0].strip() for line in text.splitlines()
+    synopsis = text[text.index("### Command line"):text.index("### As a library")]
+    commands = [line.split("#")[0].strip() for line in synopsis.splitlines()
                 if line.startswith("python -m mocap_autolabel batch ")]
     return toml, commands
 

@@ -227,3 +227,23 @@ def test_cli_review_scene_holds_both_hands(bpy_module, two_hands, tmp_path, caps
     assert [c.name for c in coll["mocap_labeled"].children] == ["Left hand", "Right hand"]
     assert _state(coll).labeling.info["hands"]["count"] == 2
     assert sorted(o.name for o in bpy.data.objects if o.type == "ARMATURE") == ["Hand_L", "Hand_R"]
+
+
+def test_a_held_prop_is_kept_out_of_the_hands_in_blender(empty_scene, bpy_module, tmp_path):
+    """Label Markers on a take whose left hand holds a rigid prop that the labeler alone gives hand
+    labels: the prop's points stay unlabeled and the Review panel says why."""
+    from mocap_autolabel.blender.review import summary
+
+    bpy = bpy_module
+    synth = two_hand_take(load_layout("han19"), 1200, seed=1, config=TwoHandConfig(prop_markers=4))
+    (tmp_path / "in").mkdir()
+    path = tmp_path / "in" / "prop.c3d"
+    write_c3d(synth.take, path)
+    coll = _import(bpy, path, tmp_path)
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    lab = _state(coll).labeling
+    assert lab.info["props"]
+    per, valid = lab.per_sample(), synth.take.valid
+    assert not ((per[:, synth.prop_slots] >= 0) & valid[:, synth.prop_slots]).any()
+    line = summary(lab, bpy.context.scene.mocap_autolabel.sure)["props"]
+    assert line.startswith("1 rigid prop kept out of the hands")

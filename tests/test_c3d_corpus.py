@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import struct
 import warnings
 
 import numpy as np
@@ -107,3 +108,62 @@ def test_empty_file_gives_one_clear_error():
     with pytest.raises(MocapInputError, match="empty") as info:
         read_c3d(path)
     assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+VICON = "ezc3d-testFiles/Vicon.c3d"  # Intel REAL, 580 frames of 51 points, data at block 29, 100 Hz
+
+
+@pytest.mark.parametrize("offset,fmt,value,disagreement", [
+    (8, "<H", 900, "frame count disagrees: 900 in the header's first/last frame, 580 in POINT:FRAMES"),
+    (8, "<H", 300, "frame count disagrees: 300 in the header's first/last frame, 580 in POINT:FRAMES"),
+    (2, "<H", 60000, "point count disagrees: 60000 in the header, 51 in POINT:USED"),
+    (16, "<H", 40, "data start disagrees: 40 in the header, 29 in POINT:DATA_START"),
+    (12, "<f", 0.01, "sample format disagrees: INT in the header's scale sign, REAL in POINT:SCALE"),
+    (20, "<f", 50.0, "frame rate disagrees: 100 Hz in POINT:RATE, 50 Hz in the header"),
+], ids=["frames-over", "frames-under", "points", "data-start", "scale-sign", "rate"])
+def test_a_header_that_disagrees_with_the_parameters_is_read_as_the_data_holds(tmp_path, offset, fmt, value,
+                                                                               disagreement):
+    """The header word is wrong, the parameter agrees with the data section's size: the file is read
+    as the original, with one warning naming both values (the issue's real case: a header frame range
+    past the data, which was refused as "truncated" while ezc3d reads it)."""
+    src = data_path("c3d", VICON)
+    data = bytearray(src.read_bytes())
+    struct.pack_into(fmt, data, offset, value)
+    patched = tmp_path / "patched.c3d"
+    patched.write_bytes(bytes(data))
+    original, take = read_c3d(src), read_c3d(patched)
+    np.testing.assert_array_equal(take.positions, original.positions)
+    assert take.names == original.names and take.rate == original.rate
+    assert [w for w in take.warnings if w not in original.warnings] == [
+        next(w for w in take.warnings if w.startswith(disagreement))]
+    if disagreement.startswith("frame count"):  # the reference reads as many frames
+        ezc3d = pytest.importorskip("ezc3d")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            assert ezc3d.c3d(str(patched))["data"]["points"].shape[2] == take.n_frames
+
+
+def test_a_header_and_parameters_that_all_overrun_the_data_are_refused(tmp_path):
+    src = data_path("c3d", VICON)
+    cut = tmp_path / "cut.c3d"
+    cut.write_bytes(src.read_bytes()[:-3000])
+    with pytest.raises(MocapInputError, match="truncated: the header declares 580 frames but the data "
+                                              "section holds only 579"):
+        read_c3d(cut)
+
+
+def test_an_integer_files_scale_that_disagrees_is_read_with_point_scale_as_ezc3d_does(tmp_path):
+    src = data_path("c3d", "io_anim_c3d/test/testfiles/sample01/Eb015pi.c3d")  # Intel INT, POINT:SCALE 0.0833
+    data = bytearray(src.read_bytes())
+    struct.pack_into("<f", data, 12, 0.5)  # the header's scale
+    patched = tmp_path / "scale.c3d"
+    patched.write_bytes(bytes(data))
+    take = read_c3d(patched)
+    np.testing.assert_array_equal(take.positions, read_c3d(src).positions)
+    assert take.warnings == ["POINT:SCALE (0.0833333) and the header's scale (0.5) disagree; read with POINT:SCALE"]
+    ezc3d = pytest.importorskip("ezc3d")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = ezc3d.c3d(str(patched))["data"]["points"][:3].transpose(2, 1, 0) / 1000.0  # mm
+    valid = ~np.isnan(take.positions)
+    assert np.abs(take.positions[valid] - ref[valid]).max() < 1e-6

@@ -814,3 +814,30 @@ def test_perm_and_cnn_vote_with_sets_settings_and_are_calibrated_at_them(tmp_pat
     new = json.loads(out.read_text())["perm/vote/han19"]
     assert new["vote_settings_from"] == "set/vote" and new["switch_cost"] == shipped["set/vote/han19"]["switch_cost"]
     assert new["source"].startswith("2 synthetic takes")
+
+
+def test_split_segments_matches_a_plain_split():
+    """Vectorised splitting equals cutting each segment at the cuts strictly inside it."""
+    from mocap_autolabel.core.temporal.voting import Segments, split_segments
+
+    def plain(segments, cuts):
+        out = []
+        for s, a, b in zip(segments.slot.tolist(), segments.start.tolist(), segments.stop.tolist()):
+            edges = sorted({a, b, *(c for c in cuts.get(s, ()) if a < c < b)})
+            out += [(s, x, y) for x, y in zip(edges[:-1], edges[1:])]
+        return out
+
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        rows = []
+        for s in range(int(rng.integers(1, 6))):
+            f = 0
+            for _ in range(int(rng.integers(1, 5))):
+                a = f + int(rng.integers(0, 3))
+                f = a + int(rng.integers(1, 8))
+                rows.append((s, a, f))
+        segments = Segments(*(np.array(c, dtype=np.int64) for c in zip(*rows)))
+        cuts = {int(s): [int(x) for x in rng.integers(-2, 40, int(rng.integers(0, 6)))]
+                for s in rng.integers(0, 7, int(rng.integers(1, 4)))}
+        got = split_segments(segments, cuts)
+        assert list(zip(got.slot.tolist(), got.start.tolist(), got.stop.tolist())) == plain(segments, cuts)

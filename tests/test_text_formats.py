@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from conftest import data_path
+from mocap_autolabel.core.errors import MocapInputError
 from mocap_autolabel.core.take import read_take
 
 HAN19 = ["ThumbCMC", "ThumbMCP", "ThumbIP", "ThumbTip", "IndexMCP", "IndexPIP", "IndexTip", "MiddleMCP",
@@ -34,3 +36,69 @@ def test_qualisys_tsv_glove13():
     thumb = take.names.index("thumb_tip")
     assert 0.02 < 1 - take.valid[:, thumb].mean() < 0.15  # real occlusions of the thumb tip
     np.testing.assert_allclose(take.positions[0, 0], [0.110406, 0.135075, 0.460584], rtol=1e-6)
+
+
+def _patched(tmp_path, src, old: str, new: str):
+    text = src.read_text()
+    assert old in text
+    path = tmp_path / src.name
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+TRC = ("hands", "han2018_dense19", "User1", "capture1", "sequence.20_training_dense_left.trc")  # 27 frames, 19
+
+
+def test_trc_counts_that_disagree_with_the_rows_are_read_as_the_rows_hold(tmp_path):
+    src = data_path(*TRC)
+    original = read_take(src)
+    take = read_take(_patched(tmp_path, src, "\t27\t19\tmm", "\t27\t60000\tmm"))  # NumMarkers
+    np.testing.assert_array_equal(take.positions, original.positions)
+    assert take.warnings == ["marker count disagrees: 60000 in NumMarkers, 19 in the marker names; the data "
+                             "rows hold 19; read 19 (unnamed markers as *N)"]
+    take = read_take(_patched(tmp_path, src, "\tPinkyTip\t", "\t\t"))  # a name left out
+    np.testing.assert_array_equal(take.positions, original.positions)
+    assert take.names == [n if n != "PinkyTip" else "*15" for n in original.names] and not take.warnings
+    take = read_take(_patched(tmp_path, src, "\tBackHand3\t", "\t\t"))  # the last name left out
+    assert take.names == original.names[:-1] + ["*18"]
+    assert take.warnings == ["marker count disagrees: 19 in NumMarkers, 18 in the marker names; the data rows "
+                             "hold 19; read 19 (unnamed markers as *N)"]
+    take = read_take(_patched(tmp_path, src, "\t27\t19\tmm", "\t2147483648\t19\tmm"))  # NumFrames
+    assert take.n_frames == original.n_frames
+    assert take.warnings == ["frame count disagrees: NumFrames says 2147483648, the file holds 26 data rows; "
+                             "read 26"]
+
+
+def test_tsv_counts_that_disagree_with_the_rows_are_read_as_the_rows_hold(tmp_path):
+    src = data_path("hands", "qualisys_glove13", "recording_part1.tsv")
+    take = read_take(_patched(tmp_path, src, "NO_OF_MARKERS\t21", "NO_OF_MARKERS\t20"))
+    assert take.n_points == 21 and take.warnings[0].startswith(
+        "marker count disagrees: 20 in NO_OF_MARKERS, 21 in the marker names; the data rows hold 21; read 21")
+    take = read_take(_patched(tmp_path, src, "NO_OF_FRAMES\t3000", "NO_OF_FRAMES\t5000"))
+    assert take.n_frames == 3000
+    assert take.warnings == ["frame count disagrees: NO_OF_FRAMES says 5000, the file holds 3000 data rows; read 3000"]
+
+
+@pytest.mark.parametrize("rate", ["nan", "-120", "inf", "0"])
+def test_a_rate_that_is_no_rate_is_one_clear_error(tmp_path, rate):
+    path = _patched(tmp_path, data_path(*TRC), "120\t120\t27", f"{rate}\t{rate}\t27")
+    with pytest.raises(MocapInputError, match="no usable frame rate"):
+        read_take(path)
+
+
+def test_trc_damage_that_no_count_explains(tmp_path):
+    """Found by the fuzzer: a frame number Blender cannot key, and a huge NumMarkers with the names
+    line gone (it made 2^31 names)."""
+    src = data_path(*TRC)
+    take = read_take(_patched(tmp_path, src, "\n0\t0\t", "\n99999999999999999999\t0\t"))
+    assert take.first_frame == 1
+    assert take.warnings == ["first frame number '99999999999999999999' is not a frame number; frames numbered "
+                             "from 1"]
+    lines = src.read_text().splitlines()
+    lines[2] = lines[2].replace("\t27\t19\t", "\t27\t2147483648\t")
+    del lines[3]
+    path = tmp_path / "no_names.trc"
+    path.write_text("\n".join(lines))
+    with pytest.raises(MocapInputError, match="the first data row holds 19 markers but the header states more "
+                                              r"\(2147483648 in NumMarkers, 57 in the marker names\)"):
+        read_take(path)

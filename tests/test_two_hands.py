@@ -244,3 +244,26 @@ def test_han2018_left_and_right_files_in_one_take(han19):
     lab = label_take(take, han19)
     assert lab.info["hands"]["count"] == 2 and lab.info["hands"]["sides"] == ["left", "right"]
     assert _accuracy(lab, take, truth, 38) > 0.995
+
+
+def test_synthetic_prop_is_rigid_held_and_ghost_in_the_truth(han19):
+    """A prop held in the left hand: its markers keep their distances (to the noise) while the
+    hand's markers do not, it stays near the left hand, and the truth calls its samples ghosts."""
+    from mocap_autolabel.core.synth.generate import EMPTY, GHOST
+    from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take
+
+    two = two_hand_take(han19, 600, seed=3, config=TwoHandConfig(prop_markers=4))
+    again = two_hand_take(han19, 600, seed=3, config=TwoHandConfig(prop_markers=4))
+    assert np.array_equal(two.take.positions, again.take.positions, equal_nan=True)
+    assert len(two.prop_slots) == 4
+    x = two.take.positions[:, two.prop_slots]
+    assert np.isin(two.labels[:, two.prop_slots], (GHOST, EMPTY)).all()
+    assert (two.labels[:, two.prop_slots] == GHOST).sum() == np.isfinite(x[..., 0]).sum()
+    m = len(han19)
+    d = np.linalg.norm(x[:, :, None] - x[:, None], axis=3)
+    prop_sd = np.nanstd(d, axis=0)[np.triu_indices(4, 1)]
+    hand = two.markers[:, :m]
+    hand_sd = np.linalg.norm(hand[:, :, None] - hand[:, None], axis=3).std(axis=0)[np.triu_indices(m, 1)]
+    assert prop_sd.max() < 0.003 < np.median(hand_sd)
+    centre = np.nanmean(x, axis=1)
+    assert np.nanmax(np.linalg.norm(centre - hand.mean(axis=1), axis=1)) < 0.12

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import errno
 import glob
 import io
 import json
@@ -22,6 +23,7 @@ import sys
 import time
 import tomllib
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 
 TAKE_EXTENSIONS = (".c3d", ".trc", ".tsv")
@@ -41,6 +43,11 @@ class BatchSettings:
         calibration: a performer calibration .json to reuse for every take.
         blend, fbx, bvh: also write these per take (need Blender or the bpy module).
         jobs: takes processed side by side (processes).
+        scheduler: run each take as a task on a Dask cluster instead: ``tcp://HOST:8786`` (a farm's
+            scheduler; inputs and the output folder must be seen by every worker under the same paths)
+            or ``local:N`` (N worker processes here). Needs the ``distributed`` package.
+        html: also write an HTML page per take (``<name>.report.html``, with pictures) and ``index.html``
+            linking them (needs matplotlib).
         force: redo takes whose outputs are already complete.
         hands: ``auto`` (find how many hands each take holds), ``1`` or ``2``.
         hand_names: how two hands' labels carry their side (see ``label --hand-names``).
@@ -62,6 +69,8 @@ class BatchSettings:
     fbx: bool = False
     bvh: bool = False
     jobs: int = 1
+    scheduler: str | None = None
+    html: bool = False
     force: bool = False
     hands: str = "auto"
     hand_names: str | None = None
@@ -155,7 +164,7 @@ def _finished(out_dir: str, name: str, settings: BatchSettings) -> dict | None:
     if settings.fill and "fill" not in report:  # filled now, not then
         return None
     # Every rig file asked for now was written then (one per hand for a take of two hands).
-    for kind in ("blend", "fbx", "bvh"):
+    for kind in ("blend", "fbx", "bvh", "html"):
         if getattr(settings, kind) and not any(k == kind or k.startswith(kind + "_") for k in outputs):
             return None
     return report
@@ -175,6 +184,23 @@ def _worker_init() -> None:
     sys.path[:] = [p for p in sys.path if not os.path.isfile(os.path.join(p or ".", "bpy", "__init__.py"))]
 
 
+def farm_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
+    """:func:`process_take` as a task on a Dask worker (a fresh process that may have inherited bpy's paths)."""
+    _worker_init()
+    return process_take(path, name, out_dir, settings)
+
+
+def failed_report(path: str, name: str, out_dir: str, reason: str) -> dict:
+    """Write and return the report of a take that never finished (its worker died on every try)."""
+    from .core.atomic import atomic_output
+
+    report = {"file": os.path.abspath(path), "name": name, "status": "failed", "error": f"{path}: {reason}",
+              "seconds": {"total": 0.0}}
+    with atomic_output(os.path.join(out_dir, name + ".report.json")) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        json.dump(report, f, indent=1)
+    return report
+
+
 def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
     """Label one take (and solve its hand) and write its outputs; never raises for a bad take.
 
@@ -191,6 +217,11 @@ def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) ->
         report["status"] = "ok"
     except MocapInputError as exc:
         report["error"] = str(exc)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EACCES, errno.EROFS):
+            report["error"] = f"{path}: unexpected {type(exc).__name__}: {exc}"
+        else:  # the disk is full, or the file too large for it, or the folder not writable
+            report["error"] = f"{path}: cannot write its outputs in {out_dir}: {exc.strerror}"
     except Exception as exc:  # one bad take must not stop the batch
         report["error"] = f"{path}: unexpected {type(exc).__name__}: {exc}"
     timings["total"] = round(time.perf_counter() - start, 4)
@@ -282,11 +313,14 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     write_c3d(written, target)
     out["outputs"]["labeled"] = os.path.basename(target)
     timings["write"] = round(time.perf_counter() - t, 4)
+    rms: list[list] = []  # per hand solved, the marker RMS per frame (mm), and its side ("" for one hand)
+    sides: list[str] = []
     if settings.solve_hand or settings.needs_blender():
         reports = []
         for side, one in solved:
             rep = one.report()
-            rep.pop("per_frame_rms_mm")
+            rms.append(rep.pop("per_frame_rms_mm"))
+            sides.append(side)
             reports.append(rep | ({"side": side} if side else {}))
         if two:
             out["hands_solved"] = reports
@@ -298,7 +332,29 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
             rigs = solved if two else solved[0][1]
             out["outputs"].update(_blender_outputs(labeled, rigs, os.path.join(out_dir, name), settings))
             timings["blender"] = round(time.perf_counter() - t, 4)
+    if settings.html:
+        t = time.perf_counter()
+        out["outputs"]["html"] = os.path.basename(name) + ".report.html"
+        _take_page(out | {"name": name, "file": os.path.abspath(path)}, labeling, take.first_frame, rms, sides,
+                   out_dir, settings)
+        timings["html"] = round(time.perf_counter() - t, 4)
     return out
+
+
+def _take_page(report: dict, labeling, first_frame: int, rms: list, sides: list[str], out_dir: str,
+               settings: BatchSettings) -> None:
+    """Write ``<name>.report.html``: the take's page, linking back to the batch's index.html."""
+    from .core.atomic import atomic_output
+    from .core.overview import label_classes
+    from .html_report import take_page
+
+    name = report["name"]
+    index = os.path.relpath("index.html", os.path.dirname(name) or ".").replace(os.sep, "/")
+    page = take_page(report | {"outputs": {k: v for k, v in report["outputs"].items() if k != "html"}},
+                     label_classes(labeling, settings.confident), labeling.names, first_frame,
+                     rms_mm=rms or None, rms_labels=[f"{s} hand" if s else "hand" for s in sides], index=index)
+    with atomic_output(os.path.join(out_dir, name + ".report.html")) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        f.write(page)
 
 
 def _blender_outputs(take, solved, stem: str, settings: BatchSettings) -> dict:
@@ -397,32 +453,21 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
         else:
             todo.append((path, name))
     start = time.perf_counter()
-    if settings.jobs <= 1 or len(todo) <= 1:
+    workers = settings.jobs
+    if settings.scheduler:
+        from .farm import farm_client, run_on_farm, worker_threads
+
+        with farm_client(settings.scheduler) as client:
+            workers = bar.jobs = worker_threads(client)
+            for report in run_on_farm(client, todo, out_dir, settings, farm_take, failed_report):
+                rows.append(_finish(bar, report))
+    elif settings.jobs <= 1 or len(todo) <= 1:
         for path, name in todo:
             bar.event("start", name=name)
             rows.append(_finish(bar, process_take(path, name, out_dir, settings)))
     else:
-        threads = str(max(1, (os.cpu_count() or 1) // settings.jobs))
-        env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
-        saved = {k: os.environ.get(k) for k in env}
-        os.environ.update(env)  # spawned workers read these before numpy and onnxruntime start
-        try:
-            context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(settings.jobs, mp_context=context, initializer=_worker_init) as pool:
-                pending = {}
-                for path, name in todo:  # no "start" events: the pool decides when a take starts
-                    pending[pool.submit(process_take, path, name, out_dir, settings)] = name
-                while pending:
-                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in finished:
-                        pending.pop(fut)
-                        rows.append(_finish(bar, fut.result()))
-        finally:
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
+        rows += _run_pool(todo, out_dir, settings, bar)
+    _clean_partials(out_dir)  # what a worker killed mid-take left (its take was redone or is reported)
     wall = time.perf_counter() - start
     rows.sort(key=lambda r: r["name"])
     failed = [r for r in rows if r["status"] == "failed"]
@@ -430,10 +475,63 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
     summary = {"takes": len(rows), "ok": sum(r["status"] == "ok" for r in rows), "failed": len(failed),
                "skipped": sum(r["skipped"] for r in rows), "seconds": round(wall, 3),
                "frames_processed": frames, "frames_per_second": round(frames / wall, 1) if wall > 0 else None,
-               "jobs": settings.jobs, "settings": dataclasses.asdict(settings) | {"extra": None}, "takes_detail": rows}
+               "jobs": settings.jobs if not settings.scheduler else workers, "scheduler": settings.scheduler,
+               "settings": dataclasses.asdict(settings) | {"extra": None}, "takes_detail": rows}
     _write_summary(out_dir, summary)
+    if settings.html:
+        from .core.atomic import atomic_output
+        from .html_report import index_page
+
+        with atomic_output(os.path.join(out_dir, "index.html")) as tmp, open(tmp, "w", encoding="utf-8") as f:
+            f.write(index_page(rows, f"Batch: {os.path.abspath(out_dir)}"))
     bar.event("end", name=f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped")
     return summary
+
+
+#: Times a take is started in a pool whose worker process died before the take is reported as failed.
+POOL_TRIES = 3
+
+
+def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings, bar: Progress) -> list[dict]:
+    """The takes in ``settings.jobs`` spawned processes; a pool whose process died (killed, out of memory) is
+    started again for the takes not finished, each up to :data:`POOL_TRIES` times, then reported as failed."""
+    rows: list[dict] = []
+    threads = str(max(1, (os.cpu_count() or 1) // settings.jobs))
+    env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)  # spawned workers read these before numpy and onnxruntime start
+    tries = dict.fromkeys((name for _, name in todo), 0)
+    try:
+        context = multiprocessing.get_context("spawn")
+        while todo:
+            broken = []
+            with ProcessPoolExecutor(settings.jobs, mp_context=context, initializer=_worker_init) as pool:
+                pending = {}
+                for path, name in todo:  # no "start" events: the pool decides when a take starts
+                    tries[name] += 1
+                    pending[pool.submit(process_take, path, name, out_dir, settings)] = (path, name)
+                while pending:
+                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        path, name = pending.pop(fut)
+                        try:
+                            rows.append(_finish(bar, fut.result()))
+                        except BrokenProcessPool:
+                            broken.append((path, name))
+            todo = []
+            for path, name in broken:
+                if tries[name] < POOL_TRIES:
+                    todo.append((path, name))
+                else:
+                    rows.append(_finish(bar, failed_report(path, name, out_dir, f"its worker process died on "
+                                                           f"each of {POOL_TRIES} tries (killed, or out of memory)")))
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    return rows
 
 
 def _finish(bar: Progress, report: dict) -> dict:
@@ -455,7 +553,8 @@ def _row(report: dict, skipped: bool) -> dict:
             "confident_share": round(summary["confident_share"], 4) if "confident_share" in summary else None,
             "uncertain_segments": len(summary.get("uncertain_segments", [])) if summary else None,
             "marker_rms_mm": hand.get("marker_rms_mm"),
-            "seconds": (report.get("seconds") or {}).get("total", 0.0)}
+            "seconds": (report.get("seconds") or {}).get("total", 0.0),
+            "page": report.get("name", "") + ".report.html" if "html" in report.get("outputs", {}) else None}
 
 
 def _write_summary(out_dir: str, summary: dict) -> None:
@@ -495,5 +594,7 @@ def format_table(summary: dict) -> str:
         elif r.get("warning"):
             lines.append(f"! {r['name']}: {r['warning']}")
     lines.append(f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped; "
-                 f"{summary['frames_processed']:,} frames in {summary['seconds']:.1f} s with {summary['jobs']} job(s)")
+                 f"{summary['frames_processed']:,} frames in {summary['seconds']:.1f} s " +
+                 (f"on {summary['jobs']} Dask worker thread(s) ({summary['scheduler']})" if summary.get("scheduler")
+                  else f"with {summary['jobs']} job(s)"))
     return "\n".join(lines)

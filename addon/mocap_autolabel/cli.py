@@ -8,6 +8,7 @@ Only the standard library is imported at module level, so this file also runs as
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import sys
@@ -129,6 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--clean", action="store_true", help="no noise, occlusion, ghosts or merges")
     syn.add_argument("--hands", type=int, choices=(1, 2), default=1,
                      help="2: a left and a right hand that touch, clap, interlace and cross (default 1)")
+    syn.add_argument("--prop", type=int, default=0, metavar="N",
+                     help="with --hands 2: a rigid prop of N (3-6) markers held in the left hand (default none)")
     syn.add_argument("-o", "--output", required=True, metavar="OUT.c3d",
                      help="the take to write; the truth goes beside it as OUT.truth.npz")
     syn.add_argument("--blend", metavar="OUT.blend",
@@ -235,9 +238,14 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--fill-method", choices=FILL_METHODS, help="fill method (default auto)")
     bat.add_argument("--max-gap", type=float, metavar="SECONDS", help="longest gap filled (default 1 s)")
     bat.add_argument("--jobs", type=int, help="takes processed side by side (default 1)")
+    bat.add_argument("--scheduler", metavar="tcp://HOST:8786|local:N",
+                     help="each take a task on a Dask cluster: a farm's scheduler, or N local workers "
+                          "(pip install \"mocap_autolabel[farm]\")")
     bat.add_argument("--hands", choices=("auto", "1", "2"), help="hands per take: found (auto, default) or forced")
     bat.add_argument("--hand-names", metavar="CONVENTION", help="how two hands' labels carry their side "
                                                                 "(see label --hand-names; default prefix, L_ThumbTip)")
+    bat.add_argument("--html", action="store_true", default=None,
+                     help="also an HTML page per take with pictures, and index.html linking them (needs matplotlib)")
     bat.add_argument("--force", action="store_true", default=None, help="redo takes whose outputs are complete")
     shown = bat.add_mutually_exclusive_group()
     shown.add_argument("--quiet", action="store_true", help="no progress, only the summary and errors")
@@ -578,6 +586,9 @@ def _label(args) -> int:
     hands = _hands_line(labeling)
     if hands:
         print(f"  hands    {hands}")
+    for prop in labeling.info.get("props", []):
+        print(f"  prop     a rigid prop ({prop['trajectories']} trajectories, frames {prop['frames'][0]}-"
+              f"{prop['frames'][1] - 1}) took hand labels: kept out of the hands, its points left unlabeled")
     for line in missed:
         print(f"  warning  {line}")
     if args.method == "gmm" and not args.fit:
@@ -811,7 +822,8 @@ def _batch(args) -> int:
         print(f"mocap_autolabel batch: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     for key in ("layout", "model", "method", "temporal", "validate", "confident", "solve_hand", "calibration",
-                "blend", "fbx", "bvh", "jobs", "force", "hands", "hand_names", "fill", "fill_method", "max_gap"):
+                "blend", "fbx", "bvh", "jobs", "scheduler", "html", "force", "hands", "hand_names", "fill",
+                "fill_method", "max_gap"):
         value = getattr(args, key)
         if value is not None:
             setattr(settings, key, value)
@@ -822,6 +834,25 @@ def _batch(args) -> int:
         print(f"mocap_autolabel batch: error: fill_method must be one of {', '.join(FILL_METHODS)} and max_gap "
               f"positive seconds", file=sys.stderr)
         return EXIT_USAGE
+    if settings.scheduler:
+        from .farm import MISSING, FarmError, parse_scheduler
+
+        if args.jobs is not None and args.scheduler is not None:
+            print("mocap_autolabel batch: error: give --jobs or --scheduler, not both", file=sys.stderr)
+            return EXIT_USAGE
+        try:
+            parse_scheduler(settings.scheduler)
+        except FarmError as exc:
+            print(f"mocap_autolabel batch: error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+        if importlib.util.find_spec("distributed") is None:
+            print(f"error: {MISSING}", file=sys.stderr)
+            return EXIT_FAILED
+    if settings.html and importlib.util.find_spec("matplotlib") is None:
+        from .html_report import MISSING as NO_MATPLOTLIB
+
+        print(f"error: {NO_MATPLOTLIB}", file=sys.stderr)
+        return EXIT_FAILED
     if settings.validate and settings.temporal != "vote":
         print("mocap_autolabel batch: error: --validate needs --temporal vote", file=sys.stderr)
         return EXIT_USAGE
@@ -846,7 +877,17 @@ def _batch(args) -> int:
         print(f"mocap_autolabel batch: error: no takes (.c3d, .trc, .tsv) in {' '.join(args.inputs)}", file=sys.stderr)
         return EXIT_USAGE
     progress = "none" if args.quiet else "json" if args.json_progress else "bar"
-    summary = run_batch(args.inputs, args.output, settings, progress)
+    from .farm import FarmError
+
+    try:
+        summary = run_batch(args.inputs, args.output, settings, progress)
+    except FarmError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except OSError as exc:  # even a take's report or the summary cannot be written (a full disk)
+        print(f"error: {args.output}: cannot write ({exc.strerror or exc}); outputs written "
+              f"before are whole, a rerun redoes the rest", file=sys.stderr)
+        return EXIT_FAILED
     print(format_table(summary))
     print(f"  summary  {os.path.join(args.output, 'summary.csv')}, {os.path.join(args.output, 'summary.json')}")
     return EXIT_FAILED if summary["failed"] else EXIT_OK
@@ -899,6 +940,9 @@ def _synth(args) -> int:
         return _fail(args.layout, exc)
     if args.hands == 2:
         return _synth_two(args, layout)
+    if args.prop:
+        print("mocap_autolabel synth: error: --prop needs --hands 2", file=sys.stderr)
+        return EXIT_USAGE
     config = dataclasses.replace(clean_config() if args.clean else SynthConfig(), rate=args.rate, side=args.side)
     synth = synthesize(layout, args.frames, seed=args.seed, config=config)
     try:
@@ -920,7 +964,7 @@ def _synth(args) -> int:
 def _synth_two(args, layout) -> int:
     """``synth --hands 2``: two interacting hands (left and right, sizes of their own)."""
     from .core.synth.generate import GHOST
-    from .core.synth.two_hands import save_two_hands, two_hand_take
+    from .core.synth.two_hands import TwoHandConfig, save_two_hands, two_hand_take
 
     if args.clean or args.side or args.blend:
         print("mocap_autolabel synth: error: --hands 2 takes no --clean, --side or --blend", file=sys.stderr)
@@ -928,9 +972,13 @@ def _synth_two(args, layout) -> int:
     if args.frames < 1:
         print(f"mocap_autolabel synth: error: --frames must be positive, got {args.frames}", file=sys.stderr)
         return EXIT_USAGE
-    two = two_hand_take(layout, args.frames, seed=args.seed, rate=args.rate)
+    if args.prop and not 3 <= args.prop <= 6:
+        print(f"mocap_autolabel synth: error: --prop takes 3 to 6 markers, got {args.prop}", file=sys.stderr)
+        return EXIT_USAGE
+    config = TwoHandConfig(prop_markers=args.prop)
+    two = two_hand_take(layout, args.frames, seed=args.seed, config=config, rate=args.rate)
     try:
-        take_path, truth = save_two_hands(two, args.output)
+        take_path, truth = save_two_hands(two, args.output, config)
     except OSError as exc:
         print(f"error: {args.output}: cannot write ({exc.strerror or exc})", file=sys.stderr)
         return EXIT_FAILED
@@ -938,6 +986,9 @@ def _synth_two(args, layout) -> int:
     print(f"{take_path}: two hands of {layout.name} ({2 * len(layout)} markers), {args.frames} frames at "
           f"{args.rate:g} Hz ({sizes}), hands within 5 cm in {100 * (two.gap < 0.05).mean():.0f} % of frames, "
           f"{two.take.n_points} slots, {(two.labels == GHOST).sum() / args.frames:.2f} ghosts per frame")
+    if len(two.prop_slots):
+        print(f"  prop     {len(two.prop_slots)} markers in the left hand, slots "
+              f"{', '.join(two.take.names[s] for s in two.prop_slots)} (ghosts in the truth)")
     print(f"  truth    {truth}")
     return EXIT_OK
 

@@ -439,8 +439,18 @@ def summary(labeling: Labeling, sure: float) -> dict:
             "uncertain": len(uncertain_segments(labeling, sure)),
             "locked": int(labeling.locked.sum()), "layout_doubt": doubt and LayoutDoubt(**doubt),
             "hands": hands, "hands_warning": facts.get("warning"),
+            "props": _props_line(labeling.info.get("props", [])),
             # perm and cnn: their calibrated confidence never reaches the bar (see the CLI's note)
             "never_confident": bool(labeling.info.get("never_confident"))}
+
+
+def _props_line(props: list[dict]) -> str | None:
+    """The panel's line on rigid props kept out of the hands (:mod:`..core.props`), or None."""
+    if not props:
+        return None
+    count = sum(p["trajectories"] for p in props)
+    return (f"{len(props)} rigid prop{'s' if len(props) > 1 else ''} kept out of the hands "
+            f"({count} trajectories, left unlabeled)")
 
 
 def legend() -> list[tuple[str, str]]:

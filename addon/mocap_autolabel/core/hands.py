@@ -147,38 +147,43 @@ def _track_centres(pos: np.ndarray, valid: np.ndarray, ids: np.ndarray, m: int,
     c0, lab0 = _two_means(x)
     joined[ids[t0, valid[t0]]] = lab0
     lost_after = max(1, int(LOST_SECONDS * rate))
+    # Each frame's points as one slice of flat arrays: the loop below runs once per frame, so its
+    # numpy calls are kept few (both hands' sums in one product).
+    rows, cols = np.nonzero(valid)
+    bounds = np.searchsorted(rows, np.arange(frames + 1))
+    flat_x, flat_id = pos[rows, cols], ids[rows, cols]
+    which = np.arange(2)[:, None]
+    alive_at = np.zeros((frames, 2), dtype=bool)
     for order in (range(t0, frames), range(t0 - 1, -1, -1)):
         c = c0.copy()
         unseen = np.zeros(2, dtype=np.int64)
         for f in order:
-            cols = np.flatnonzero(valid[f])
-            x = pos[f, cols]
-            alive = unseen < lost_after
-            if len(x):
-                tid = ids[f, cols]
+            lo, hi = bounds[f], bounds[f + 1]
+            if hi > lo:
+                x, tid = flat_x[lo:hi], flat_id[lo:hi]
                 lab = joined[tid]
                 new = lab < 0
                 if new.any():
-                    d = np.linalg.norm(x[new, None] - c[None], axis=2)
+                    alive = unseen < lost_after
+                    d = ((x[new, None] - c[None]) ** 2).sum(axis=2)
                     d[:, ~alive] = np.inf
                     near = np.argmin(d, axis=1)
-                    lab[new] = np.where(d[np.arange(len(near)), near] < HAND_RADIUS, near, -1)
-                # Points far from every live hand: a lost hand comes back there.
-                lost = np.flatnonzero(unseen >= lost_after)
-                if len(lost) and (lab < 0).sum() >= 3:
-                    lab[lab < 0] = lost[0]
-                joined[tid] = np.where(joined[tid] < 0, lab, joined[tid])
-                for h in range(2):
-                    mine = x[lab == h]
-                    if len(mine) >= 2:
-                        c[h] = mine.mean(axis=0)
-                        unseen[h] = 0
-                    else:
-                        unseen[h] += 1
+                    lab[new] = np.where(d[np.arange(len(near)), near] < HAND_RADIUS ** 2, near, -1)
+                    # Points far from every live hand: a lost hand comes back there.
+                    lost = np.flatnonzero(unseen >= lost_after)
+                    if len(lost) and (lab < 0).sum() >= 3:
+                        lab[lab < 0] = lost[0]
+                    joined[tid[new]] = lab[new]
+                mine = lab == which  # (2, k)
+                count = mine.sum(axis=1)
+                seen = count >= 2
+                c[seen] = (mine @ x)[seen] / count[seen, None]
+                unseen = np.where(seen, 0, unseen + 1)
             else:
                 unseen += 1
-            alive = unseen < lost_after
-            centre[f] = np.where(alive[:, None], c, np.nan)
+            alive_at[f] = unseen < lost_after
+            centre[f] = c
+    centre[~alive_at] = np.nan
     return centre, joined
 
 
@@ -194,9 +199,14 @@ def _hand_gap(pos: np.ndarray, hand: np.ndarray, frames: np.ndarray) -> np.ndarr
     out = np.full(len(frames), np.inf)
     for a in range(0, len(frames), 1024):
         f = frames[a:a + 1024]
-        d = np.linalg.norm(pos[f][:, :, None] - pos[f][:, None, :], axis=3)
-        cross = (hand[f][:, :, None] == 0) & (hand[f][:, None, :] == 1)
-        out[a:a + 1024] = np.where(cross, np.nan_to_num(d, nan=np.inf), np.inf).min(axis=(1, 2))
+        x, h = np.nan_to_num(pos[f]), hand[f]
+        # |a - b|^2 = |a|^2 + |b|^2 - 2 a.b as a batched product: the (F, P, P, 3) differences cost
+        # ten times as much. Points of neither hand are moved a kilometre away.
+        p0 = np.where((h == 0)[..., None], x, 1e3)
+        p1 = np.where((h == 1)[..., None], x, -1e3)
+        d2 = (p0 * p0).sum(axis=2)[:, :, None] + (p1 * p1).sum(axis=2)[:, None, :] - 2 * p0 @ p1.transpose(0, 2, 1)
+        both = (h == 0).any(axis=1) & (h == 1).any(axis=1)
+        out[a:a + 1024] = np.where(both, np.sqrt(np.maximum(d2.min(axis=(1, 2)), 0.0)), np.inf)
     return out
 
 
@@ -221,7 +231,8 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
         layout: the layout of one hand (M markers).
         hands: ``"auto"``, or 1 / 2 to force the count (a take with one hand where two are forced
             still gets one: ``info["forced"]`` says so).
-        ignore: optional bool ``(P,)``: slots kept out of every hand (named body markers).
+        ignore: optional bool ``(P,)``: slots kept out of every hand (named body markers), or
+            ``(F, P)``: samples kept out (a prop's trajectories).
 
     Returns:
         :class:`Hands`.
@@ -232,7 +243,7 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
     m = len(layout)
     valid = take.valid.copy()
     if ignore is not None:
-        valid[:, ignore] = False
+        valid &= ~(ignore if ignore.ndim == 2 else ignore[None, :])
     frames, points = valid.shape
     pos = np.where(valid[..., None], take.positions, np.nan).astype(np.float64)
     one = Hands(1, np.where(valid, 0, -1).astype(np.int8), np.zeros_like(valid), np.full((frames, 2, 3), np.nan),

@@ -20,9 +20,10 @@ from .hand.calibrate import Calibration, calibrate
 from .hand.ik import GATE, MIN_MARKERS, Fit
 from .hands import HandNaming, Hands, decide_sides, find_hands, replace_valid, side_evidence
 from .labelers import METHODS, FrameBatch, Labeler, make_labeler, pack_frames
-from .labelers.assign import assign, row_probabilities
+from .labelers.assign import assign, row_log_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
 from .layout import Layout
+from .props import Prop, find_props, prop_mask, rigid_parts
 from .take import Take
 from .temporal.confidence import (
     load_calibration,
@@ -235,6 +236,13 @@ class _HandLabels:
         return RigidPairs(np.concatenate([one.pairs + h * self.m for h in range(self.hands)]),
                           np.tile(one.distance, self.hands), np.tile(one.tolerance, self.hands))
 
+    def hand_pairs(self, rigid: RigidPairs, h: int) -> RigidPairs:
+        """The pairs of ``rigid`` (from :meth:`rigid_pairs`) within hand ``h``; all of them for one hand."""
+        if self.hands == 1:
+            return rigid
+        own = rigid.pairs[:, 0] // self.m == h
+        return RigidPairs(rigid.pairs[own], rigid.distance[own], rigid.tolerance[own])
+
     def to_internal(self, label: int, order: list[int]) -> int:
         """A final label (sides' order: left hand first) as the internal one (hands' order)."""
         if label < 0:
@@ -270,41 +278,46 @@ def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = N
     return out
 
 
-def _two_hand_scores(take: Take, layout: Layout, found: Hands, batch: FrameBatch, labeler: Labeler,
-                     rows: np.ndarray | None = None, joint: np.ndarray | None = None) -> np.ndarray:
-    """Joint per-frame scores ``(F, K, 2M + 1)`` of a two-hand take: each hand's points are scored by
-    ``labeler`` on their own; a sample offered to both hands gets both, each at half the weight;
-    a sample of no hand is null. With ``rows`` (frame indices) and the ``joint`` scores of an
-    earlier call, only those frames are scored again (a copy of ``joint`` is returned)."""
+def _hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBatch, labeler: Labeler,
+                 rows: np.ndarray) -> np.ndarray:
+    """One hand's scores ``(R, K, M + 1)`` of the ``rows`` (frame indices) of the joint ``batch``, in
+    its columns: the points ``members`` (bool ``(F, P)``) offers to the hand, scored by ``labeler``
+    on their own; NaN where the hand was not offered the point."""
     m = len(layout)
-    rows = np.arange(take.n_frames) if rows is None else np.asarray(rows)
     mask, slots = batch.mask[rows], batch.slots[rows]
     frames, k = mask.shape
-    part_joint = np.full((frames, k, 2 * m + 1), _OTHER_HAND, dtype=np.float32)
+    out = np.full((frames, k, m + 1), np.nan, dtype=np.float32)
     column = np.full((frames, take.n_points), -1, dtype=np.int64)  # joint column of each (frame, slot)
     f_idx, k_idx = np.nonzero(mask)
     column[f_idx, slots[f_idx, k_idx]] = k_idx
+    positions = np.where(members[rows][..., None], take.positions[rows], np.nan).astype(np.float32)
+    part = _pack(replace(take, positions=positions, residuals=None), _cap(layout))
+    scores = labeler.scores(part.points, part.mask)
+    pf, pk = np.nonzero(part.mask)
+    jk = column[pf, part.slots[pf, pk]]
+    ok = jk >= 0
+    out[pf[ok], jk[ok]] = scores[pf[ok], pk[ok]]
+    return out
+
+
+def _joint_scores(hand_scores: Sequence[np.ndarray], found: Hands, batch: FrameBatch,
+                  rows: np.ndarray) -> np.ndarray:
+    """Joint per-frame scores ``(R, K, 2M + 1)`` of the ``rows`` of a two-hand take from each hand's
+    scores (:func:`_hand_scores`, all frames): a sample offered to both hands gets both, each at
+    half the weight; a sample of no hand is null."""
+    m = hand_scores[0].shape[2] - 1
+    slots = batch.slots[rows]
+    frames, k = slots.shape
+    both = found.both[rows][np.arange(frames)[:, None], np.maximum(slots, 0)] & (slots >= 0)
+    weight = np.where(both, np.log(0.5), 0.0).astype(np.float32)
+    joint = np.full((frames, k, 2 * m + 1), _OTHER_HAND, dtype=np.float32)
     null = np.full((frames, k), -np.inf)
-    cap = _cap(layout)
-    positions, both = take.positions[rows], found.both[rows]
-    for h in range(2):
-        members = found.members(h)[rows]
-        part = _pack(replace(take, positions=np.where(members[..., None], positions, np.nan).astype(np.float32),
-                             residuals=None), cap)
-        scores = labeler.scores(part.points, part.mask)
-        pf, pk = np.nonzero(part.mask)
-        ps = part.slots[pf, pk]
-        jk = column[pf, ps]
-        ok = jk >= 0
-        pf, pk, ps, jk = pf[ok], pk[ok], ps[ok], jk[ok]
-        weight = np.where(both[pf, ps], np.log(0.5), 0.0).astype(np.float32)
-        part_joint[pf, jk, h * m:(h + 1) * m] = scores[pf, pk, :m] + weight[:, None]
-        null[pf, jk] = np.logaddexp(null[pf, jk], scores[pf, pk, m] + weight)
-    part_joint[..., 2 * m] = np.where(np.isfinite(null), null, 0.0)
-    if joint is None:
-        return part_joint
-    joint = joint.copy()
-    joint[rows] = part_joint
+    for h, scores in enumerate(hand_scores):
+        scores = scores[rows]
+        seen = ~np.isnan(scores[..., m])
+        joint[seen, h * m:(h + 1) * m] = scores[seen, :m] + weight[seen, None]
+        null[seen] = np.logaddexp(null[seen], scores[seen, m] + weight[seen])
+    joint[..., 2 * m] = np.where(np.isfinite(null), null, 0.0)
     return joint
 
 
@@ -377,7 +390,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                progress: Callable[[str], None] | None = None,
                done: Callable[[float], None] | None = None, hands: str | int = "auto",
                sides: Sequence[str] | None = None, naming: HandNaming | str | None = None,
-               keep_named: bool = True) -> Labeling:
+               keep_named: bool = True, props: bool = True, exclude: np.ndarray | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -429,11 +442,16 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             always get one (default ``L_``/``R_`` prefixes); one hand keeps plain names unless given.
         keep_named: points the file already names that are not ``layout``'s markers (a labeled
             body, a named prop) are kept out of the hands and stay null; False offers them too.
+        props: look for rigid props among the trajectories (:mod:`.props`): a rigid group that
+            took labels but is no rigid part of a hand is kept out and the take labeled again;
+            ``info["props"]`` lists them.
+        exclude: bool ``(F, P)``: samples kept out of the hands (null), e.g. a prop's.
 
     Returns:
         the :class:`Labeling`; ``info`` holds the settings and the time of each stage, and
         ``info["hands"]`` the hands found (count, sides with their evidence).
     """
+    args = dict(locals())  # to label again without the props found
     if method not in METHODS:
         raise ValueError(f"unknown labeling method {method!r}; choose one of {', '.join(METHODS)}")
     if temporal not in TEMPORAL:
@@ -457,6 +475,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
 
     naming = HandNaming(naming) if isinstance(naming, str) else naming
     ignore = other_named_points(take, layout, naming) if keep_named else None
+    if exclude is not None:
+        ignore = exclude | (False if ignore is None else ignore[None, :])
     say("finding hands")
     found = _hands(take, layout, hands, ignore)
     times["hands"] = time.perf_counter() - t0
@@ -477,7 +497,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     t = time.perf_counter()
     say("packing frames")
     if ignore is not None and ignore.any():
-        take_in = replace_valid(take, valid & ~ignore[None, :])
+        take_in = replace_valid(take, valid & ~(ignore if ignore.ndim == 2 else ignore[None, :]))
     else:
         take_in = take
     batch = _pack(take_in, _cap(layout) * found.count)
@@ -489,7 +509,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     share(0.02)
     if found.count == 2:
         labeler = labeler or make_labeler(method, layout, model)
-        joint = scores = _two_hand_scores(take_in, layout, found, batch, labeler)
+        every = np.arange(take.n_frames)
+        hand_scores = [_hand_scores(take_in, layout, found.members(h), batch, labeler, every) for h in range(2)]
+        joint = scores = _joint_scores(hand_scores, found, batch, every)
     else:
         labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
         hooked = done is not None and hasattr(labeler, "on_batch")
@@ -531,25 +553,37 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         continuity = load_continuity(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
     info["continuity"] = [float(v) for v in continuity]
 
-    def decide(scores: np.ndarray, first: Labeling | None = None) -> Labeling:
+    f_idx, k_idx = np.nonzero(mask)
+    member = None if found.count == 1 else \
+        np.stack([found.members(h)[f_idx, slots[f_idx, k_idx]] for h in range(2)], axis=1)
+
+    def decide(scores: np.ndarray, first: Labeling | None = None, samples: Samples | None = None) -> Labeling:
         return _decide(scores, batch, take, hand_labels, method, temporal, segments, locked_at, info, score, p, q,
                        split_swaps, n_best, calibrate, null_prior, crossings, switch_cost, partner,
-                       continuity, first)
+                       continuity, first, samples, member)
 
     say(f"temporal step: {temporal}")
     t = time.perf_counter()
-    labeling = decide(scores)
+    samples = score_samples(scores, batch)
+    labeling = decide(scores, samples=samples)
     times["temporal"] = time.perf_counter() - t
     if found.count == 2:
         # A marker given to the wrong hand is one its labeler rejects: trajectories left null near
         # the other hand are offered to both hands, and both are labeled again.
+        before = [found.members(h) for h in range(2)]
         offered, rows = _offer_nulls(found, labeling, take_in)
         if offered:
             say("temporal step: both hands again")
             t = time.perf_counter()
-            joint = _two_hand_scores(take_in, layout, found, batch, labeler, rows, joint)
+            for h in range(2):  # a hand whose points did not change keeps its scores
+                changed = np.flatnonzero((found.members(h) != before[h]).any(axis=1))
+                if len(changed):
+                    hand_scores[h][changed] = _hand_scores(take_in, layout, found.members(h), batch, labeler, changed)
+            joint = joint.copy()
+            joint[rows] = _joint_scores(hand_scores, found, batch, rows)
+            member = np.stack([found.members(h)[f_idx, slots[f_idx, k_idx]] for h in range(2)], axis=1)
             scores = _apply_constraints(joint, slots, mask, constraints)
-            labeling = decide(scores, first=labeling)
+            labeling = decide(scores, first=labeling, samples=score_samples(scores, batch, rows, samples))
             times["hands_again"] = time.perf_counter() - t
         info["hands_offered_again"] = offered
     share(decided)
@@ -584,10 +618,63 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                 single.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
                 share(1.0)
                 return single
+    if props and temporal == "vote":
+        t = time.perf_counter()
+        found_props = _props(take, tracklets, labeling, hand_labels)
+        times["props"] = time.perf_counter() - t
+        if found_props:
+            say(f"labeling again without {len(found_props)} rigid prop(s)")
+            again = label_take(**{**args, "props": False,
+                                  "exclude": prop_mask(found_props, take.n_frames, take.n_points)
+                                  | (False if exclude is None else exclude)})
+            again.info["props"] = [p.as_dict() for p in found_props]
+            again.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
+            share(1.0)
+            return again
     share(1.0)
     times["total"] = time.perf_counter() - t0
     info["seconds"] = {key: round(v, 4) for key, v in times.items()}
     return labeling
+
+
+def _props(take: Take, tracklets, labeling: Labeling, labels: _HandLabels) -> list[Prop]:
+    """The rigid props of a labeled take (:func:`.props.find_props`), judged by the labels its
+    trajectories mostly took."""
+    per = labeling.per_sample()
+    ids = tracklets.id_map(take.n_frames, take.n_points)
+    f, p = np.nonzero(ids >= 0)
+    n_labels = len(labels)
+    votes = np.bincount(ids[f, p].astype(np.int64) * (n_labels + 1) + (per[f, p].astype(np.int64) + 1),
+                        minlength=len(tracklets) * (n_labels + 1)).reshape(len(tracklets), n_labels + 1)
+    tracklet_label = votes.argmax(axis=1) - 1
+    one = rigid_parts(rigid_pairs(labels.layout).pairs, labels.m)
+    parts = np.concatenate([one + h * (one.max() + 1) for h in range(labels.hands)])
+    positions = np.where(take.valid[..., None], take.positions, np.nan)
+    return find_props(positions, tracklets, take.rate, tracklet_label, parts)
+
+
+def score_samples(scores: np.ndarray, batch: FrameBatch, rows: np.ndarray | None = None,
+                  previous: Samples | None = None) -> Samples:
+    """The scored samples of a take, in the order of ``np.nonzero(batch.mask)``: floored
+    log-probabilities and the per-frame assignment. With ``rows`` (frame indices) and the
+    ``previous`` samples of the same batch, only the samples of those frames are computed again."""
+    mask, slots = batch.mask, batch.slots
+    if rows is not None and previous is not None:
+        rows = np.asarray(rows, dtype=np.int64)
+        sub = score_samples(scores[rows], FrameBatch(batch.points[rows], mask[rows], slots[rows]))
+        again = np.zeros(mask.shape[0], dtype=bool)
+        again[rows] = True
+        at = again[previous.frame]  # samples are in frame order, as are the rows' own
+        out = replace(previous, logp=previous.logp.copy(), label=previous.label.copy(),
+                      confidence=previous.confidence.copy())
+        out.logp[at], out.label[at], out.confidence[at] = sub.logp, sub.label, sub.confidence
+        return out
+    f_idx, k_idx = np.nonzero(mask)
+    logp = row_log_probabilities(scores[f_idx, k_idx])  # == scores[mask], in its order
+    frame_labels, frame_conf = assign(scores, mask, logp)
+    np.maximum(logp, np.float32(LOG_FLOOR), out=logp)
+    return Samples(frame=f_idx.astype(np.int64), slot=slots[f_idx, k_idx].astype(np.int64), logp=logp,
+                   label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
 
 
 def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabels, method: str, temporal: str,
@@ -595,19 +682,19 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
             split_swaps: bool, n_best: int, calibrate: bool, null_prior: tuple[float, float],
             crossings: dict[int, list[int]], switch_cost: tuple[float, float],
             partner: tuple[float, float] | None, continuity: tuple[float, float],
-            first: Labeling | None = None) -> Labeling:
+            first: Labeling | None = None, samples: Samples | None = None,
+            member: np.ndarray | None = None) -> Labeling:
     """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences. With ``first``
     (an earlier labeling of the take), the evidence of rigid partners and continuity is read off it
-    and one vote is held, instead of a first vote to read it off."""
+    and one vote is held, instead of a first vote to read it off. ``samples``: the scores as
+    :func:`score_samples` gives them, where the caller has them already. ``member``: bool
+    ``(n, hands)``, the hands each sample is offered to (two hands; None: one)."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
     layout, n_labels = labels.layout, len(labels)
     f_idx, k_idx = np.nonzero(mask)
-    probabilities = row_probabilities(scores[f_idx, k_idx].astype(np.float64))  # == scores[mask], in its order
-    logp = np.log(np.maximum(probabilities, np.exp(LOG_FLOOR))).astype(np.float32)
-    frame_labels, frame_conf = assign(scores, mask, probabilities)
-    samples = Samples(frame=f_idx.astype(np.int64), slot=slots[f_idx, k_idx].astype(np.int64), logp=logp,
-                      label=frame_labels[f_idx, k_idx].astype(np.int64), confidence=frame_conf[f_idx, k_idx])
+    if samples is None:
+        samples = score_samples(scores, batch)
     if temporal == "vote":
         def run_vote(scored: Samples) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
             return vote(scored, segments, locked_at, score, p, q, split_swaps, null_prior=null_prior,
@@ -628,18 +715,24 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
             # vote's labels.
             extra = np.zeros_like(samples.logp)
             at = points[f_idx, k_idx].astype(np.float64)
+            # Each hand's evidence for the samples offered to it (the others score its labels at the
+            # floor, far below anything the evidence adds).
+            m = labels.m
+            rows = [None] if member is None else [np.flatnonzero(member[:, h]) for h in range(labels.hands)]
             if with_rigid:
                 rigid = take_distances(rigid, at, samples.frame, per, n_labels)
-                extra += partner_logp(at, samples.frame, per, n_labels, rigid, *partner)
+                for h, sel in enumerate(rows):
+                    extra += partner_logp(at, samples.frame, per, n_labels, labels.hand_pairs(rigid, h), *partner,
+                                          rows=sel)
             if with_continuity:
                 held_for = held if first is not None else \
                     np.where(seg >= 0, (decided.stop - decided.start)[np.maximum(seg, 0)], 0)
                 # Per hand: a marker's neighbours, whose motion carries it across a gap, are its own hand's.
-                m = labels.m
                 for h in range(labels.hands):
                     own = np.where((per >= h * m) & (per < (h + 1) * m), per - h * m, NULL)
                     extra[:, h * m:(h + 1) * m] += continuity_logp(at, samples.frame, samples.slot, own, held_for,
-                                                                   segments, m, take.rate, *continuity)[:, :m]
+                                                                   segments, m, take.rate, *continuity,
+                                                                   rows=rows[min(h, len(rows) - 1)])[:, :m]
             if extra.any() or first is not None:
                 stopped = facts["time_limited"]
                 decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
@@ -651,12 +744,14 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
                             label=label.astype(np.int16), confidence=np.zeros(len(decided), dtype=np.float32),
                             locked=first_locked != EMPTY, info=info)
     else:
+        per = np.full(valid.shape, NULL, dtype=np.int16)
         if temporal == "viterbi":
             from .temporal.viterbi import viterbi_labels
 
             frame_labels = viterbi_labels(scores, mask, points, take.rate, n_best=n_best)
-        per = np.full(valid.shape, NULL, dtype=np.int16)
-        per[f_idx, slots[f_idx, k_idx]] = frame_labels[f_idx, k_idx]
+            per[f_idx, slots[f_idx, k_idx]] = frame_labels[f_idx, k_idx]
+        else:
+            per[samples.frame, samples.slot] = samples.label
         split = np.zeros(valid.shape, dtype=bool)
         split[segments.start, segments.slot] = True
         labeling = segments_from_runs(labels.names, per, valid, info, split=split)

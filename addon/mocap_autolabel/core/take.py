@@ -19,6 +19,13 @@ UNLABELED_NAME = re.compile(r"^(\*\d+|M\d{3,}|Unlabeled\s*\d*|)$", re.IGNORECASE
 #: A marker further than this from the origin (metres) means wrong units: no capture volume is that big.
 ABSURD_DISTANCE_M = 100.0
 
+#: Frame rates at or above this (frames per second) are damage, not a capture system's.
+MAX_RATE = 1e6
+
+#: A coordinate further than this (metres) is damage, not a position: a unit mistake (metres read
+#: as millimetres) stays under 1e4 m, and beyond 1e9 the squares of distances overflow float32.
+DAMAGED_DISTANCE_M = 1e6
+
 
 @dataclass
 class Take:
@@ -143,6 +150,37 @@ def mark_missing(positions: np.ndarray, residuals: np.ndarray | None = None) -> 
     if residuals is not None:
         residuals[missing] = np.nan
     return missing
+
+
+def to_metres(positions: np.ndarray, scale: float, residuals: np.ndarray | None = None) -> str:
+    """Convert, in place, source units to metres; samples that are damage become missing.
+
+    A damaged file (a flipped exponent bit, a huge scale) holds infinite or absurdly large
+    coordinates (beyond ``DAMAGED_DISTANCE_M``): they become gaps, not positions that overflow
+    later arithmetic, and no numpy warning reaches the terminal.
+
+    Args:
+        positions: float ``(frames, points, 3)`` in source units, modified in place.
+        scale: metres per source unit.
+        residuals: float ``(frames, points)`` in source units or None; scaled too, NaN where a
+            sample is dropped.
+
+    Returns:
+        One warning line naming how many samples were dropped, or "" when none was.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        positions *= scale
+        if residuals is not None:
+            residuals *= scale
+        damaged = (np.abs(positions) > DAMAGED_DISTANCE_M).any(axis=2)  # inf too; NaN compares False
+    count = int(damaged.sum())
+    if not count:
+        return ""
+    positions[damaged] = np.nan
+    if residuals is not None:
+        residuals[damaged] = np.nan
+    return (f"{count} damaged sample{'s' if count > 1 else ''} (infinite, or more than "
+            f"{DAMAGED_DISTANCE_M:g} m from the origin) read as missing")
 
 
 def check_plausible(take: Take) -> None:

@@ -75,6 +75,8 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
             box.label(text=s["hands"])
         if s["hands_warning"]:
             box.label(text=s["hands_warning"], icon="ERROR")
+        if s["props"]:
+            box.label(text=s["props"], icon="INFO")
         box.label(text=f"Labels present: {s['labels']}")
         box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
         box.label(text=f"Uncertain segments: {s['uncertain']}   Locked: {s['locked']}")

@@ -12,7 +12,10 @@ Writing: ezc3d, the reference implementation; the output round-trips through ezc
 
 from __future__ import annotations
 
+import collections
+import errno
 import io
+import itertools
 import os
 import struct
 import warnings
@@ -23,7 +26,7 @@ import numpy as np
 from ... import __version__
 from ..atomic import atomic_output
 from ..errors import MocapInputError
-from ..take import Take, mark_missing, unit_scale
+from ..take import MAX_RATE, Take, mark_missing, to_metres, unit_scale
 
 BLOCK = 512
 MAGIC = 0x50
@@ -81,22 +84,21 @@ def read_c3d(path: str | os.PathLike) -> Take:
         n_param_blocks = param_head[2] or 1
         fh.seek(0)
         reader, fixes = _parse_metadata(path, fh.read(param_start + n_param_blocks * BLOCK))
-        layout = _layout(path, reader, size)
+        layout, disagreements = _layout(path, reader, size)
         positions, residuals, computed = _read_samples(fh, layout)
 
     units = _string_param(reader, "POINT:UNITS")
-    take_warnings = [f"repaired parameter section: {fix}" for fix in fixes]
+    take_warnings = [f"repaired parameter section: {fix}" for fix in fixes] + disagreements
     if not units:
         units = _guess_units(positions)
         take_warnings.append(f"no POINT:UNITS parameter; the values look like {units}")
-    scale_m = unit_scale(units, path)
-    positions *= scale_m
-    residuals *= scale_m
+    damaged = to_metres(positions, unit_scale(units, path), residuals)
+    take_warnings += [damaged] if damaged else []
 
     names = _point_labels(reader, layout.n_points)
     if layout.n_points == 0:
         take_warnings.append("the file holds no 3D points (analog data only)")
-    dupes = sorted({n for n in names if n and names.count(n) > 1})
+    dupes = sorted(n for n, count in collections.Counter(names).items() if n and count > 1)
     if dupes:
         take_warnings.append(f"duplicate point names: {', '.join(dupes[:5])}" + (" ..." if len(dupes) > 5 else ""))
 
@@ -104,9 +106,8 @@ def read_c3d(path: str | os.PathLike) -> Take:
     # file that states residuals at all: one whose every word is 0 says nothing either way.
     valid = ~np.isnan(positions[..., 0])
     filled = computed & valid if (valid & ~computed).any() else None
-    rate = _point_rate(reader)
-    if not rate > 0:
-        raise MocapInputError(path, "no usable frame rate (POINT:RATE and the header rate are 0)")
+    rate, note = _point_rate(path, reader)
+    take_warnings += [note] if note else []
     return Take(
         positions=positions,
         names=names,
@@ -151,7 +152,7 @@ def rebuild_parameter_section(meta: bytes) -> tuple[bytes, list[str]]:
         if n_chars == 0 or group_id == 0:
             break
         name_end = pos + 2 + abs(n_chars)
-        name = meta[pos + 2:name_end].decode("latin-1").strip()
+        name = _printable(meta[pos + 2:name_end].decode("latin-1").strip())
         offset = struct.unpack_from(endian + "h", meta, name_end)[0]
         body_end = name_end + offset if offset > 0 else end
         body = bytearray(meta[name_end + 2:min(body_end, end)])
@@ -242,7 +243,13 @@ def _string_param(reader, key: str) -> str:
         value = p.string_value if len(p.dimensions) <= 1 else " ".join(p.string_array.ravel())
     except Exception:
         return ""
-    return str(value).strip().strip("\x00").strip()
+    return _printable(str(value).strip().strip("\x00").strip())
+
+
+def _printable(text: str) -> str:
+    """``text`` with every control character (a newline in a damaged name) shown as "?": names
+    and units go into one-line messages and Blender object names."""
+    return text if text.isprintable() else "".join(c if c.isprintable() else "?" for c in text)
 
 
 def _number_param(reader, key: str) -> float | None:
@@ -262,11 +269,18 @@ def _number_param(reader, key: str) -> float | None:
     return None
 
 
-def _point_rate(reader) -> float:
-    rate = _number_param(reader, "POINT:RATE")
-    if not rate or not np.isfinite(rate):
-        rate = float(reader.header.frame_rate)
-    return float(rate)
+def _point_rate(path: str, reader) -> tuple[float, str]:
+    """Frames per second: POINT:RATE, else the header's; and a warning when the two disagree."""
+    header_rate = float(reader.header.frame_rate)
+    param_rate = _number_param(reader, "POINT:RATE")
+    usable = [r for r in (param_rate, header_rate) if r is not None and np.isfinite(r) and 0 < r < MAX_RATE]
+    if not usable:
+        raise MocapInputError(path, f"no usable frame rate (POINT:RATE is {param_rate}, the header's rate "
+                                    f"{header_rate:g}; expected a number of frames per second above 0)")
+    if len(usable) == 2 and not np.isclose(usable[0], usable[1], rtol=1e-4):
+        return usable[0], (f"frame rate disagrees: {usable[0]:g} Hz in POINT:RATE, {usable[1]:g} Hz in "
+                           f"the header; read {usable[0]:g} Hz")
+    return usable[0], ""
 
 
 def _point_labels(reader, n_points: int) -> list[str]:
@@ -278,7 +292,7 @@ def _point_labels(reader, n_points: int) -> list[str]:
                 break
             continue
         try:
-            names.extend(str(s).strip() for s in np.atleast_1d(p.string_array))
+            names.extend(_printable(str(s).strip()) for s in np.atleast_1d(p.string_array))
         except Exception:
             break
     names = names[:n_points]
@@ -293,33 +307,116 @@ def _vendor(reader, layout: _Layout) -> str:
     return f"{vendor} ({kind})" if vendor else f"unknown ({kind})"
 
 
-def _layout(path: str, reader, file_size: int) -> _Layout:
+def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
+    """The data block's layout, and a warning for each header/parameter disagreement resolved.
+
+    The header and the parameters can disagree on the point count (POINT:USED), the sample
+    format (the sign of POINT:SCALE), the data start (POINT:DATA_START) and the frame count
+    (POINT:FRAMES, TRIAL:ACTUAL_START/END_FIELD). Every combination of the stated values is
+    checked against the size of the data section (see :func:`_fit`); among equals the header's
+    values win, as they define the layout of a standard file. Only when no combination fits in
+    the file is it refused (truncated). The analog words per frame are the header's alone.
+    """
     header = reader.header
     processor = {"INTEL": "Intel", "DEC": "DEC", "MIPS": "MIPS"}.get(reader._dtypes.proc_type, "Intel")
-    # The header defines the data layout; parameters only fill in where it says 0.
-    n_points = int(header.point_count or _number_param(reader, "POINT:USED") or 0)
-    scale = _number_param(reader, "POINT:SCALE")
-    if scale is None or scale == 0 or not np.isfinite(scale):
-        scale = float(header.scale_factor)
+    points = _stated(("the header", header.point_count), ("POINT:USED", _number_param(reader, "POINT:USED")))
+    param_scale = _number_param(reader, "POINT:SCALE")
+    header_scale = float(header.scale_factor)
+    usable = [s for s in (param_scale, header_scale) if s is not None and s != 0 and np.isfinite(s)]
+    formats = _stated(("the header's scale sign", header_scale < 0),
+                      ("POINT:SCALE", None if param_scale is None or np.isnan(param_scale) else param_scale < 0))
+    starts = _stated(("the header", header.data_block if header.data_block > 1 else None),
+                     ("POINT:DATA_START", _number_param(reader, "POINT:DATA_START")), minimum=2)
+    if not starts:
+        starts = [(2, "the default")]
+    # The header's frame fields are 16 bits: a range of 65535 frames or a wrapped one is no count.
+    header_frames = int(header.last_frame) - int(header.first_frame) + 1
+    frames = _stated(("the header's first/last frame",
+                      header_frames if header_frames > 0 and header.last_frame != 65535 else None),
+                     ("POINT:FRAMES", _number_param(reader, "POINT:FRAMES")),
+                     ("TRIAL:ACTUAL_START/END_FIELD", _trial_frames(reader) or None), minimum=0)
     analog_words = int(header.analog_count)
-    data_block = int(header.data_block if header.data_block > 1 else _number_param(reader, "POINT:DATA_START") or 2)
-    layout = _Layout(processor, scale < 0, abs(scale) or 1.0, n_points, analog_words,
-                     (data_block - 1) * BLOCK, 0)
-    frame_bytes = layout.frame_bytes
-    available = max(file_size - layout.data_offset, 0) // frame_bytes if frame_bytes else 0
-    declared = int(header.last_frame) - int(header.first_frame) + 1
-    # The header's frame fields are 16 bits: longer takes state their length in parameters.
-    long_take = int(max(_number_param(reader, "POINT:FRAMES") or 0, _trial_frames(reader)))
-    if long_take > 65535:
-        declared = long_take
-    elif declared <= 0 or header.last_frame == 65535:  # saturated or wrapped: trust the file size
-        declared = available
-    if frame_bytes and declared > available:
+
+    best, first = None, None
+    for (n_points, _), (is_real, _), (start, _) in itertools.product(points or [(0, "")], formats, starts):
+        word = 4 if is_real else 2
+        frame_bytes = (4 * n_points + analog_words) * word
+        space = file_size - (start - 1) * BLOCK
+        available = max(space, 0) // frame_bytes if frame_bytes else 0
+        for n_frames, _ in frames or [(available, "")]:
+            rank = _fit(space, n_frames, frame_bytes)
+            # Among layouts that leave data unread, the one that reads the most.
+            key = (rank, space - n_frames * frame_bytes if rank == 2 else 0)
+            choice = (key, n_points, is_real, start, n_frames, available)
+            first = first or choice
+            if best is None or key < best[0]:
+                best = choice
+    (rank, _), n_points, is_real, start, n_frames, available = best
+    if rank == 3:
+        _, n_points, is_real, start, n_frames, available = first
         raise MocapInputError(
-            path, f"file is truncated: the header declares {declared} frames but the data "
-            f"section holds only {available}")
-    layout.n_frames = max(declared, 0)
-    return layout
+            path, f"file is truncated: the header declares {n_frames} frames but the data "
+            f"section holds only {available}" + _disagreement_note(points, formats, starts, frames))
+    scale = abs(usable[0]) if usable else 1.0
+    notes = [_resolved("point count", points, n_points, f"{n_points} points"),
+             _resolved("sample format", formats, is_real, "REAL (float)" if is_real else "INT (16-bit)"),
+             _resolved("data start", starts, start, f"block {start}"),
+             _resolved("frame count", frames, n_frames, f"{n_frames} frames")]
+    if not is_real and len(usable) == 2 and not np.isclose(abs(usable[0]), abs(usable[1]), rtol=1e-4):
+        notes.append(f"POINT:SCALE ({abs(usable[0]):g}) and the header's scale ({abs(usable[1]):g}) "
+                     f"disagree; read with POINT:SCALE")
+    if not is_real and not usable:
+        raise MocapInputError(path, "no usable scale for its integer samples (POINT:SCALE and the header's are 0)")
+    layout = _Layout(processor, is_real, scale, n_points, analog_words, (start - 1) * BLOCK, n_frames)
+    return layout, [n for n in notes if n]
+
+
+def _fit(space: int, n_frames: int, frame_bytes: int) -> int:
+    """How well ``n_frames`` frames of ``frame_bytes`` fill ``space`` bytes: 0 the data holds
+    exactly that many whole frames, 1 the rest is under a block (padding), 2 they fit with more
+    after them, 3 they do not fit (or the data starts past the end of the file). Zero frames, or
+    frames of no bytes, are never exact: they say nothing about the data."""
+    if space < 0:
+        return 3
+    rest = space - n_frames * frame_bytes
+    if rest < 0:
+        return 3
+    if not frame_bytes or not n_frames:
+        return 1 if rest < BLOCK else 2  # nothing to check against, or no frame read from a data section
+    return 0 if rest < frame_bytes else 1 if rest < BLOCK else 2
+
+
+def _stated(*sources: tuple[str, float | bool | None], minimum: int = 0) -> list[tuple[int, str]]:
+    """The distinct values that ``sources`` state, in order, each with who states it.
+
+    ``None`` (absent) and values below ``minimum`` or not whole numbers are left out.
+    """
+    values: dict[int, list[str]] = {}
+    for name, value in sources:
+        if value is None or isinstance(value, float) and not (np.isfinite(value) and value == int(value)):
+            continue
+        if int(value) >= minimum:
+            values.setdefault(int(value), []).append(name)
+    return [(value, " and ".join(names)) for value, names in values.items()]
+
+
+def _resolved(what: str, stated: list[tuple[int, str]], used: int, said: str) -> str:
+    """A warning line when the sources in ``stated`` disagree on ``what``; "" when they agree."""
+    if len(stated) < 2:
+        return ""
+    claims = ", ".join(f"{_claim(what, value)} in {who}" for value, who in stated)
+    return f"{what} disagrees: {claims}; read {said}, which the data section's size supports"
+
+
+def _claim(what: str, value: int) -> str:
+    if what == "sample format":
+        return "REAL" if value else "INT"
+    return str(value)
+
+
+def _disagreement_note(*stated: list[tuple[int, str]]) -> str:
+    parts = [", ".join(f"{who} {value}" for value, who in s) for s in stated if len(s) > 1]
+    return f" (and none of the stated layouts fits: {'; '.join(parts)})" if parts else ""
 
 
 def _trial_frames(reader) -> int:
@@ -327,9 +424,10 @@ def _trial_frames(reader) -> int:
     ends = []
     for key in ("TRIAL:ACTUAL_START_FIELD", "TRIAL:ACTUAL_END_FIELD"):
         p = _param(reader, key)
-        if p is None or p.total_bytes < 4:
+        try:
+            lo, hi = p.uint16_array.ravel()[:2]
+        except Exception:  # absent, or too short to hold two words
             return 0
-        lo, hi = p.uint16_array.ravel()[:2]
         ends.append(int(lo) + 65536 * int(hi))
     return ends[1] - ends[0] + 1 if ends[1] >= ends[0] else 0
 
@@ -347,8 +445,18 @@ def _read_samples(fh, layout: _Layout) -> tuple[np.ndarray, np.ndarray, np.ndarr
         dtype = np.dtype(">f4" if layout.is_real else ">i2")
     else:
         dtype = np.dtype("<f4" if layout.is_real else "<i2")
-    frame_bytes = layout.frame_bytes
     fh.seek(layout.data_offset)
+    with np.errstate(all="ignore"):  # damaged words (NaN, inf, overflow) become missing samples
+        _convert_chunks(fh, layout, dtype, positions, residuals, computed)
+    return positions, residuals, computed
+
+
+def _convert_chunks(fh, layout: _Layout, dtype: np.dtype, positions: np.ndarray, residuals: np.ndarray,
+                    computed: np.ndarray) -> None:
+    """Fill ``positions`` and ``residuals`` (source units) and ``computed`` (a 4th word of 0) from the
+    data block, chunk by chunk."""
+    n_f, n_p = layout.n_frames, layout.n_points
+    frame_bytes = layout.frame_bytes
     for f0 in range(0, n_f, CHUNK_FRAMES):
         nf = min(CHUNK_FRAMES, n_f - f0)
         raw = fh.read(nf * frame_bytes)
@@ -369,7 +477,6 @@ def _read_samples(fh, layout: _Layout) -> tuple[np.ndarray, np.ndarray, np.ndarr
         res[...] = np.where(fourth < 0, -1.0, (fourth.astype(np.int32) & 0xFF) * layout.scale)
         computed[f0:f0 + nf] = fourth == 0
         mark_missing(xyz, res)
-    return positions, residuals, computed
 
 
 def _file_values(positions: np.ndarray, scale_m: float) -> np.ndarray:
@@ -429,3 +536,19 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     c["header"]["points"]["first_frame"] = max(int(take.first_frame) - 1, 0)
     with atomic_output(path) as tmp:
         c.write(tmp)
+        _check_written(tmp, path, n_f, n_p)
+
+
+def _check_written(tmp: str, path: str, n_frames: int, n_points: int) -> None:
+    """Raise OSError if ezc3d's write (which never reports a failed write) left ``tmp`` shorter than its data.
+
+    The header's DATA_START block (word 9) plus ``n_frames x n_points`` REAL samples of 16 bytes is the
+    least a whole file holds; a full disk or a file size limit leaves less.
+    """
+    size = os.path.getsize(tmp)
+    with open(tmp, "rb") as f:
+        header = f.read(18)
+    data_start = int.from_bytes(header[16:18], "little") if len(header) == 18 else 0
+    if data_start < 2 or size < (data_start - 1) * 512 + 16 * n_frames * n_points:
+        raise OSError(errno.EFBIG if size else errno.ENOSPC, "the file was cut short while writing (is the disk full?)",
+                      path)

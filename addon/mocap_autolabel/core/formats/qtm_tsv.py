@@ -5,8 +5,8 @@ from __future__ import annotations
 import os
 
 from ..errors import MocapInputError
-from ..take import Take, mark_missing, unit_scale
-from ._text import marker_table, read_lines
+from ..take import Take, mark_missing, to_metres, unit_scale
+from ._text import first_frame_number, frame_count_note, frame_rate, marker_count, marker_table, read_lines
 
 #: QTM writes its TSV exports in millimetres.
 QTM_UNITS = "mm"
@@ -17,6 +17,8 @@ def read_qtm_tsv(path: str | os.PathLike) -> Take:
 
     Newer exports have a ``Frame  Time  name X ...`` column line before the data; older ones
     start the data right after the header. Empty fields and (0, 0, 0) are missing samples.
+    Where NO_OF_MARKERS, MARKER_NAMES and the data rows disagree, or NO_OF_FRAMES and the
+    rows, the rows are read, with a warning.
     """
     path = os.fspath(path)
     lines = read_lines(path)
@@ -30,21 +32,23 @@ def read_qtm_tsv(path: str | os.PathLike) -> Take:
         row += 1
     if "MARKER_NAMES" not in header or "FREQUENCY" not in header:
         raise MocapInputError(path, "not a Qualisys TSV export (no MARKER_NAMES / FREQUENCY header)")
-    names = [n.strip() for n in header["MARKER_NAMES"] if n.strip()]
-    try:
-        rate = float(header["FREQUENCY"][0])
-    except ValueError:
-        raise MocapInputError(path, f"FREQUENCY is not a number: {header['FREQUENCY'][0]!r}") from None
+    named = [n.strip() for n in header["MARKER_NAMES"] if n.strip()]
+    rate = frame_rate(path, ("FREQUENCY", header["FREQUENCY"][0]))
     first_col = 0
     if row < len(lines) and lines[row].startswith("Frame"):
         columns = lines[row].split("\t")
         first_col = 2 if len(columns) > 1 and columns[1].strip() == "Time" else 1
         row += 1
-    data = lines[row:]
-    positions = marker_table(path, data, first_col, len(names))
+    rows = lines[row:]
+    n_markers, names, note = marker_count(path, [("NO_OF_MARKERS", _first(header, "NO_OF_MARKERS"))], named, rows,
+                                          first_col)
+    positions = marker_table(path, rows, first_col, n_markers)
+    data = [r for r in rows if r.strip()]
+    numbers = [r.split("\t", 1)[0] for r in data[:1] + data[-1:]] if first_col else []
+    notes = [note, frame_count_note("NO_OF_FRAMES", _first(header, "NO_OF_FRAMES"), len(data), numbers)]
     mark_missing(positions)
-    positions *= unit_scale(QTM_UNITS, path)
-    first_frame = int(data[0].split("\t", 1)[0]) if first_col and data else 1
+    notes.append(to_metres(positions, unit_scale(QTM_UNITS, path)))
+    first_frame, note = first_frame_number(data) if first_col else (1, "")
     return Take(
         positions=positions,
         names=names,
@@ -53,4 +57,11 @@ def read_qtm_tsv(path: str | os.PathLike) -> Take:
         source_units=QTM_UNITS,
         source=path,
         vendor="Qualisys (TSV)",
+        warnings=[n for n in [*notes, note] if n],
     )
+
+
+def _first(header: dict[str, list[str]], key: str) -> str | None:
+    """The first value of a header line, None if the line is absent."""
+    values = header.get(key)
+    return values[0] if values else None

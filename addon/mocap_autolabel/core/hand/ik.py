@@ -17,7 +17,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 from ..rotations import (
     continuous_quaternions,
@@ -328,6 +327,8 @@ def smooth_poses(poses: np.ndarray, rate: float, cutoff_hz: float = 10.0) -> np.
     out = np.array(poses, dtype=float)
     if cutoff_hz <= 0 or cutoff_hz >= rate / 2:
         return out
+    from scipy.signal import butter, sosfiltfilt  # here: scipy.signal costs a labeling run 0.4 s to import
+
     sos = butter(2, cutoff_hz / (rate / 2), output="sos")
     solved = np.isfinite(out[:, 0])
     edges = np.flatnonzero(np.diff(np.concatenate([[0], solved.astype(np.int8), [0]])))

@@ -23,6 +23,7 @@ from ..formats.c3d import write_c3d
 from ..hands import HandNaming
 from ..layout import Layout
 from .generate import EMPTY, GHOST, SynthConfig, SynthTake, synthesize, write_truth
+from .props import hold_prop
 
 #: What the hands do in each phase of the schedule.
 PHASES = ("apart", "touch", "clap", "interlace", "cross")
@@ -45,6 +46,8 @@ class TwoHandConfig:
             ``bury_share``, drawn once per phase).
         synth: each hand's generator settings (default: :class:`.generate.SynthConfig`, the
             realistic corruption of one-hand synthetic takes).
+        prop_markers: 3-6 to put a rigid prop of that many markers in the left hand
+            (:func:`.props.hold_prop`); 0 for none. Its samples are ghosts in the truth.
     """
 
     apart: tuple[float, float] = (0.2, 0.4)
@@ -54,6 +57,7 @@ class TwoHandConfig:
     bury: float = 0.02
     bury_share: float = 0.7
     synth: SynthConfig | None = None
+    prop_markers: int = 0
 
 
 def synthesize_two_hands(layout: Layout, frames: int, seed: int = 0, config: TwoHandConfig | None = None,
@@ -170,6 +174,7 @@ class TwoHandTake:
         sides: ``["left", "right"]``; hands: the two :class:`.generate.SynthTake` they were made from.
         phases: ``(start, stop, kind)`` of the interaction schedule.
         gap: ``(F,)`` metres: the distance between the nearest markers of the two hands.
+        prop_slots: the slots of a held prop's markers (ghosts in ``labels``), if any.
     """
 
     take: object
@@ -179,6 +184,7 @@ class TwoHandTake:
     phases: list
     gap: np.ndarray
     seed: int
+    prop_slots: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @property
     def layout(self) -> Layout:
@@ -194,11 +200,20 @@ def two_hand_take(layout: Layout, frames: int, seed: int = 0, config: TwoHandCon
     labels = np.concatenate([left.labels, np.where(right.labels >= 0, right.labels + m, right.labels)], axis=1)
     keep = np.isfinite(positions).all(axis=2).any(axis=0)  # slots emptied by burying go
     positions, labels = positions[:, keep], labels[:, keep].astype(np.int16)
+    prop_slots = np.zeros(0, dtype=np.int64)
+    cfg = config or TwoHandConfig()
+    if cfg.prop_markers:
+        noise = float(np.mean((cfg.synth or SynthConfig()).noise_sd))
+        prop, _ = hold_prop(left.markers, rate, np.random.default_rng([seed, 33]), cfg.prop_markers, noise_sd=noise)
+        prop_slots = positions.shape[1] + np.arange(cfg.prop_markers)
+        positions = np.concatenate([positions, prop.astype(positions.dtype)], axis=1)
+        labels = np.concatenate([labels, np.where(np.isfinite(prop[..., 0]), GHOST, EMPTY).astype(np.int16)], axis=1)
     take = replace(left.take, positions=positions, names=[f"*{i}" for i in range(positions.shape[1])],
                    vendor="mocap_autolabel synth (two hands)")
     a, b = left.markers, right.markers
     d = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=3).reshape(frames, -1)
-    return TwoHandTake(take, labels, np.concatenate([a, b], axis=1), (left, right), phases, d.min(axis=1), seed)
+    return TwoHandTake(take, labels, np.concatenate([a, b], axis=1), (left, right), phases, d.min(axis=1), seed,
+                       prop_slots)
 
 
 def save_two_hands(two: TwoHandTake, path: str | os.PathLike, config: TwoHandConfig | None = None) -> tuple[str, str]:

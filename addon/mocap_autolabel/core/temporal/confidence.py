@@ -52,11 +52,13 @@ def segment_evidence(labeling, samples) -> np.ndarray:
     m = samples.logp.shape[1] - 1
     label = labeling.label[seg].astype(np.int64)
     col = np.where(label < 0, m, label)
-    lp = samples.logp[rows].astype(np.float64)
-    chosen = lp[np.arange(len(rows)), col]
-    others = lp.copy()
-    others[np.arange(len(rows)), col] = -np.inf
-    margin = np.clip(chosen - others.max(axis=1), -10.0, 10.0)
+    lp = samples.logp if len(rows) == len(seg) == len(samples.frame) else samples.logp[rows]
+    chosen = lp[np.arange(len(rows)), col].astype(np.float64)
+    # The best other column: the row's best, or its second best where the label is the best.
+    top = np.argmax(lp, axis=1)
+    second = -np.partition(-lp, 1, axis=1)[:, 1]
+    best_other = np.where(top == col, second, lp[np.arange(len(rows)), top]).astype(np.float64)
+    margin = np.clip(chosen - best_other, -10.0, 10.0)
     agree = samples.label[rows] == label
     count = np.maximum(np.bincount(seg, minlength=n), 1)
     out = np.zeros((n, 4), dtype=np.float32)

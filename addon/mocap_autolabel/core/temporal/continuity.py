@@ -38,7 +38,8 @@ WINDOW = 12
 
 def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, label: np.ndarray,
                     held_for: np.ndarray, tracklets: Segments, n_labels: int, rate: float,
-                    inside: float, outside: float, window: int | None = None) -> np.ndarray:
+                    inside: float, outside: float, window: int | None = None,
+                    rows: np.ndarray | None = None) -> np.ndarray:
     """Evidence ``(n, M + 1)`` nats of each sample for each label from continuity at the ends of
     its trajectory (the null column is 0).
 
@@ -52,6 +53,8 @@ def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, 
         rate: frames per second.
         inside, outside: nats per sample for (against) a label at (not at) its predicted spot.
         window: frames at each end that earn the evidence (default :data:`WINDOW`).
+        rows: the samples to weigh (indices; default all): only their trajectories' ends are
+            checked, and the other samples get 0. Anchors are read off all samples.
     """
     n = len(frame)
     window = WINDOW if window is None else window
@@ -60,7 +63,8 @@ def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, 
         return out
     frames = int(frame.max()) + 1
     anchor = (label >= 0) & (held_for >= MIN_ANCHOR)
-    x = np.full((frames, n_labels, 3), np.nan)
+    # float32: millimetre tolerances, and half the memory traffic of the (P, M, 3) gathers below.
+    x = np.full((frames, n_labels, 3), np.nan, dtype=np.float32)
     x[frame[anchor], label[anchor]] = positions[anchor]
     held = ~np.isnan(x[..., 0])
     index = np.arange(frames)[:, None]
@@ -68,33 +72,39 @@ def continuity_logp(positions: np.ndarray, frame: np.ndarray, slot: np.ndarray, 
     first = np.minimum.accumulate(np.where(held, index, frames)[::-1], axis=0)[::-1]
     # Tracklets cover every slot of the take, samples only the points that were scored (a frame
     # crowded past the labeler's cap keeps the points nearest the hand): size by both.
-    own = np.full((frames, int(max(slot.max(), tracklets.slot.max())) + 1, 3), np.nan)
+    n_slots = int(max(slot.max(), tracklets.slot.max())) + 1
+    own = np.full((frames, n_slots, 3), np.nan)
     own[frame, slot] = positions
+    anchored = np.full((frames, n_slots), -1, dtype=np.int64)  # the label a sample anchors, if any
+    anchored[frame[anchor], slot[anchor]] = label[anchor]
     seg = segment_of(tracklets, frame, slot)
-    s = np.flatnonzero(seg >= 0)  # the samples on a checked trajectory
+    s = np.flatnonzero(seg >= 0) if rows is None else np.asarray(rows)[seg[rows] >= 0]  # on a checked trajectory
+    checked = np.zeros(len(tracklets), dtype=bool)
+    checked[seg[s]] = True
     max_gap = MAX_GAP_S * rate
     before = np.where((tracklets.start > 0)[:, None], last[np.maximum(tracklets.start - 1, 0)], -1)
     after = np.where((tracklets.stop < frames)[:, None], first[np.minimum(tracklets.stop, frames - 1)], frames)
     for end, at, t0 in (("start", tracklets.start, before), ("stop", tracklets.stop - 1, after)):
         gap = np.abs(at[:, None] - t0)
-        ok = (t0 >= 0) & (t0 < frames) & (gap <= max_gap)
+        ok = (t0 >= 0) & (t0 < frames) & (gap <= max_gap) & checked[:, None]
         evidence = np.zeros((len(tracklets), n_labels), dtype=np.float32)
         ti, li = np.nonzero(ok)
         if len(ti):
-            a0 = t0[ti, li]
-            here = own[at[ti], tracklets.slot[ti]]  # (P, 3) the trajectory's end point
+            a0, a1 = t0[ti, li], at[ti]
+            here = own[a1, tracklets.slot[ti]]  # (P, 3) the trajectory's end point
             was = x[a0, li]  # (P, 3) the label's anchor
-            # The label's neighbours at the anchor, and how they moved from there to the end frame
-            # (markers on the trajectory itself cannot vouch for it: leave out what it holds).
-            moved = x[at[ti]] - x[a0]  # (P, M, 3)
-            near = np.linalg.norm(x[a0] - was[:, None], axis=2)  # (P, M)
-            near[np.isnan(moved[..., 0]) | (np.arange(n_labels)[None] == li[:, None])] = np.inf
-            mine = np.linalg.norm(x[at[ti]] - here[:, None], axis=2) < 1e-9
-            near[mine] = np.inf
+            # The label's neighbours at the anchor (squared distances: only their order counts),
+            # and how they moved from there to the end frame. Markers on the trajectory itself
+            # cannot vouch for it: leave out the label it holds at that end.
+            d = x[a0] - was[:, None]  # (P, M, 3)
+            near = np.einsum("pmi,pmi->pm", d, d)
+            near[~(held[a0] & held[a1]) | (np.arange(n_labels)[None] == li[:, None])] = np.inf
+            mine = anchored[a1, tracklets.slot[ti]]
+            near[np.flatnonzero(mine >= 0), mine[mine >= 0]] = np.inf
             k = min(NEIGHBOURS, n_labels)
-            pick = np.argsort(near, axis=1)[:, :k]
+            pick = np.argpartition(near, k - 1, axis=1)[:, :k] if k < n_labels else np.argsort(near, axis=1)
             use = np.isfinite(np.take_along_axis(near, pick, axis=1))
-            shift = np.take_along_axis(moved, pick[..., None], axis=1)
+            shift = x[a1[:, None], pick] - x[a0[:, None], pick]  # (P, k, 3) the neighbours' motion
             count = use.sum(axis=1)
             shift = np.where(use[..., None], shift, 0.0).sum(axis=1) / np.maximum(count, 1)[:, None]
             r = np.linalg.norm(here - (was + shift), axis=1)

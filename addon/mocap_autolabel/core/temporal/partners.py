@@ -110,7 +110,7 @@ def _holders(frame: np.ndarray, label: np.ndarray, n_labels: int) -> np.ndarray:
 
 
 def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_labels: int,
-                 rigid: RigidPairs, inside: float, outside: float) -> np.ndarray:
+                 rigid: RigidPairs, inside: float, outside: float, rows: np.ndarray | None = None) -> np.ndarray:
     """Evidence ``(n, M + 1)`` nats of each sample for each label from its rigid partners.
 
     Args:
@@ -120,6 +120,8 @@ def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_
         n_labels: ``M``.
         rigid: the layout's rigid pairs.
         inside, outside: nats for (against) a label per partner at (not at) its distance.
+        rows: the samples to weigh (indices; default all); the others get 0. Partners are found
+            among all samples.
 
     Returns:
         float32 ``(n, M + 1)``; the null column is 0.
@@ -130,12 +132,17 @@ def partner_logp(positions: np.ndarray, frame: np.ndarray, label: np.ndarray, n_
         return out.T
     holder = _holders(frame, label, n_labels)
     positions = np.asarray(positions, dtype=np.float32)  # millimetre tolerances: float32 is ample
+    inside, outside = np.float32(inside), np.float32(outside)
+    q = slice(None) if rows is None else np.asarray(rows)
     for b in np.unique(rigid.pairs[:, 1]):
-        partner = holder[frame, b]
-        seen = np.flatnonzero((partner >= 0) & (label != b))
-        diff = positions[seen] - positions[partner[seen]]
+        # Label b's position in each frame, then every sample's distance to it (NaN: b unseen).
+        at = np.full((len(holder), 3), np.nan, dtype=np.float32)
+        held = holder[:, b] >= 0
+        at[held] = positions[holder[held, b]]
+        diff = positions[q] - at[frame[q]]
         d = np.sqrt(np.einsum("ij,ij->i", diff, diff))  # once for every label paired with b
+        d[label[q] == b] = np.nan  # b's own samples have no partner b
+        against = np.where(np.isnan(d), np.float32(0), -outside)
         for r in np.flatnonzero(rigid.pairs[:, 1] == b):
-            out[rigid.pairs[r, 0], seen] += np.where(np.abs(d - rigid.distance[r]) <= rigid.tolerance[r],
-                                                     inside, -outside)
+            out[rigid.pairs[r, 0], q] += np.where(np.abs(d - rigid.distance[r]) <= rigid.tolerance[r], inside, against)
     return out.T

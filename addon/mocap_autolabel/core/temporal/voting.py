@@ -16,7 +16,7 @@ Two scores are available:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
@@ -62,13 +62,24 @@ def split_segments(segments: Segments, cuts: dict[int, list[int]]) -> Segments:
     """Split segments at frames: ``cuts`` maps a slot to frames where a new segment must begin."""
     if not cuts:
         return segments
-    slot, start, stop = [], [], []
-    for s, a, b in zip(segments.slot.tolist(), segments.start.tolist(), segments.stop.tolist()):
-        edges = sorted({a, b, *(c for c in cuts.get(s, ()) if a < c < b)})
-        slot += [s] * (len(edges) - 1)
-        start += edges[:-1]
-        stop += edges[1:]
-    return Segments(np.array(slot, dtype=np.int64), np.array(start, dtype=np.int64), np.array(stop, dtype=np.int64))
+    cut_slot = np.concatenate([np.full(len(v), k, dtype=np.int64) for k, v in cuts.items()])
+    cut_frame = np.concatenate([np.asarray(v, dtype=np.int64) for v in cuts.values()])
+    # The segment each cut falls strictly inside (cuts on an edge or outside every segment do nothing).
+    inside = segment_of(segments, cut_frame, cut_slot)
+    keep = inside >= 0
+    keep[keep] = cut_frame[keep] > segments.start[inside[keep]]
+    if not keep.any():
+        return segments
+    # Every segment's start, plus each cut as a new start; sorted, each runs to the next start of
+    # its slot or to its segment's end.
+    key = np.unique(np.concatenate([segments.slot * (1 << 32) + segments.start,
+                                    cut_slot[keep] * (1 << 32) + cut_frame[keep]]))
+    slot, start = key >> 32, key & ((1 << 32) - 1)
+    owner = segment_of(segments, start, slot)
+    stop = segments.stop[owner].copy()
+    nxt = np.flatnonzero(owner[1:] == owner[:-1])
+    stop[nxt] = start[nxt + 1]
+    return Segments(slot.astype(np.int64), start.astype(np.int64), stop.astype(np.int64))
 
 
 def segment_of(segments: Segments, frame: np.ndarray, slot: np.ndarray) -> np.ndarray:
@@ -99,7 +110,13 @@ def find_swaps(samples: Samples, seg: np.ndarray, segments: Segments, min_run: i
     seg_sorted = seg[order]
     bounds = np.searchsorted(seg_sorted, np.arange(len(segments) + 1))
     best = np.argmax(samples.logp, axis=1)
-    for s in range(len(segments)):
+    # A segment whose frames all prefer one label has nothing to cut: that label is also the best
+    # of its sum (each frame's log-probability of it is its highest), so neither test below fires.
+    best_sorted = best[order]
+    flips = np.flatnonzero((best_sorted[1:] != best_sorted[:-1]) & (seg_sorted[1:] == seg_sorted[:-1]))
+    for s in np.unique(seg_sorted[flips + 1]):
+        if s < 0:
+            continue
         lo, hi = bounds[s], bounds[s + 1]
         if hi - lo > min_run:
             for frame in _edge_swaps(samples.logp[order[lo:hi]], best[order[lo:hi]],
@@ -172,7 +189,8 @@ def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: s
     if score == "likelihood":
         # Sums per segment as a sparse product: many times faster than np.add.at.
         member = csr_matrix((np.ones(len(seg)), (seg, np.arange(len(seg)))), shape=(n_segments, len(seg)))
-        return np.asarray(member @ samples.logp[ok].astype(np.float64)), count
+        logp = samples.logp if ok.all() else samples.logp[ok]
+        return np.asarray(member @ logp.astype(np.float64, copy=False)), count
     if score == "power":
         col = np.where(samples.label[ok] >= 0, samples.label[ok], m1 - 1).astype(np.int64)
         acc = np.bincount(seg * m1 + col, weights=samples.confidence[ok].astype(np.float64) ** p,
@@ -455,6 +473,8 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
         segments = split_segments(segments, swaps)
         seg = segment_of(segments, samples.frame, samples.slot)
     facts = {"swaps_split": int(sum(len(v) for v in swaps.values())), "refined": 0, "time_limited": 0}
+    if score == "likelihood":  # summed in float64 in every round: convert once
+        samples = replace(samples, logp=samples.logp.astype(np.float64))
     while True:
         weights, count = segment_weights(samples, seg, len(segments), score, p, q)
         weights[:, -1] += null_prior[0] * tracklet_share(segments) + null_prior[1] * count

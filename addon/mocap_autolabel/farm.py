@@ -1,0 +1,103 @@
+"""Batch takes as tasks on a Dask cluster (``batch --scheduler``): a farm's scheduler or a local one.
+
+Each take is one task running :func:`mocap_autolabel.batch.process_take` on a worker, which writes the
+take's outputs atomically into the output folder (a folder every worker and this process see under
+the same path). Dask reschedules the task of a worker that dies (``distributed.scheduler.allowed-failures``
+times) and retries a task that raised (``retries``); a take that fails on every try is reported like a
+bad file. Needs the optional ``distributed`` package (``pip install "mocap_autolabel[farm]"``); nothing
+else in the package imports it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import re
+from collections.abc import Callable, Iterator
+
+#: Tries per take for a task that raised (a worker that died is rescheduled by Dask on its own).
+TRIES = 3
+
+MISSING = ('batch --scheduler needs Dask\'s distributed package, which is not installed: '
+           'pip install "mocap_autolabel[farm]" (or pip install distributed)')
+
+
+class FarmError(Exception):
+    """The cluster cannot be used (package missing, scheduler unreachable, bad address); one line."""
+
+
+def parse_scheduler(text: str) -> tuple[str, int | str]:
+    """``("local", N)`` for ``local:N``, else ``("address", text)`` for a scheduler such as ``tcp://host:8786``."""
+    match = re.fullmatch(r"local:(\d+)", text.strip())
+    if match:
+        n = int(match.group(1))
+        if not 1 <= n <= 64:
+            raise FarmError(f"--scheduler {text}: a local cluster has 1 to 64 workers")
+        return "local", n
+    if not re.fullmatch(r"([a-z]+://)?[^\s:/]+:\d+", text.strip()):
+        raise FarmError(f"--scheduler {text}: give a scheduler address (tcp://HOST:8786) or local:N")
+    return "address", text.strip()
+
+
+@contextlib.contextmanager
+def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterator:
+    """A ``distributed.Client`` on ``scheduler`` (``local:N`` starts N worker processes here and stops them after).
+
+    A local cluster's workers run one task each, with ``threads_per_worker`` threads for numpy and
+    onnxruntime (default: this machine's cores shared among them).
+    """
+    kind, where = parse_scheduler(scheduler)
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise FarmError(MISSING) from None
+    if kind == "local":
+        threads = str(threads_per_worker or max(1, (os.cpu_count() or 1) // int(where)))
+        env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+        for attempt in range(TRIES):  # a worker process that dies while the cluster starts fails the start
+            try:
+                cluster = LocalCluster(n_workers=int(where), threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.ERROR, env=env)
+                break
+            except (RuntimeError, OSError, TimeoutError) as exc:
+                if attempt == TRIES - 1:
+                    raise FarmError(f"could not start a local Dask cluster of {where} workers: {exc}") from None
+        with cluster, Client(cluster) as client:
+            yield client
+        return
+    try:
+        client = Client(where)  # waits Dask's distributed.comm.timeouts.connect (30 s by default)
+    except (OSError, TimeoutError) as exc:
+        raise FarmError(f"cannot reach the Dask scheduler at {where}: {exc}") from None
+    with client:
+        yield client
+
+
+def worker_threads(client) -> int:
+    """Tasks the cluster runs at once (its workers' threads), at least 1."""
+    return max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info().get("workers", {}).values()))
+
+
+def run_on_farm(client, todo: list[tuple[str, str]], out_dir: str, settings, task: Callable,
+                failed: Callable[[str, str, str, str], dict]) -> Iterator[dict]:
+    """Submit ``task(path, name, out_dir, settings)`` per take; yield each take's report as it finishes.
+
+    Paths are made absolute, so workers must see inputs and ``out_dir`` under the same paths. A take
+    whose task failed on every try (its worker died each time, or it raised) yields
+    ``failed(path, name, out_dir, reason)``.
+    """
+    from distributed import as_completed
+
+    out_dir = os.path.abspath(out_dir)
+    futures = {}
+    for path, name in todo:
+        fut = client.submit(task, os.path.abspath(path), name, out_dir, settings, retries=TRIES - 1, pure=False,
+                            key=f"mocap_autolabel-{name}-{os.urandom(6).hex()}")
+        futures[fut] = (path, name)
+    for fut in as_completed(futures):
+        path, name = futures[fut]
+        try:
+            yield fut.result()
+        except Exception as exc:  # KilledWorker (it died on every try) or what the task raised each time
+            yield failed(path, name, out_dir, f"failed on every try on the cluster ({type(exc).__name__}: {exc})")

@@ -1,0 +1,82 @@
+"""HTML reports: the labels x frames classes, and batch's pages as a real browser (headless Chromium) shows them."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from mocap_autolabel.cli import main
+from mocap_autolabel.core.labeling import Labeling
+from mocap_autolabel.core.overview import ABSENT, CONFIDENT, FILLED, GAP, UNCERTAIN, VERY_UNCERTAIN, label_classes
+from test_batch import _synthetic
+
+GREEN = (0x2E, 0x9E, 0x4F)  # html_report.COLOURS[CONFIDENT]
+
+
+def test_label_classes_show_confidence_gaps_and_fills():
+    # two labels over 10 frames: label 0 on slot 0 frames 2-4 (sure) and 7-8 (unsure); label 1 on slot 1 frames
+    # 0-9 (very unsure); an unlabeled segment on slot 2 paints nothing
+    lab = Labeling(names=["A", "B"], n_frames=10, n_points=3, slot=np.array([0, 0, 1, 2]),
+                   start=np.array([2, 7, 0, 0]), stop=np.array([5, 9, 10, 10]), label=np.array([0, 0, 1, -1], np.int16),
+                   confidence=np.array([0.99, 0.9, 0.2, 0.1], np.float32), locked=np.zeros(4, bool), info={})
+    classes = label_classes(lab, confident=0.95)
+    a = [ABSENT, ABSENT, CONFIDENT, CONFIDENT, CONFIDENT, GAP, GAP, UNCERTAIN, UNCERTAIN, ABSENT]
+    assert classes.tolist() == [a, [VERY_UNCERTAIN] * 10]
+    filled = np.zeros((2, 10), bool)
+    filled[0, 5] = filled[0, 0] = True  # a fill inside the gap shows; one outside the label's span is ignored
+    assert label_classes(lab, 0.95, filled)[0].tolist() == a[:5] + [FILLED] + a[6:]
+
+
+def _has_green(png: bytes) -> float:
+    """Share of the picture's pixels in the confident green."""
+    import matplotlib.image
+
+    rgb = (matplotlib.image.imread(io.BytesIO(png), format="png")[..., :3] * 255).round()
+    return float((np.abs(rgb - GREEN).max(axis=-1) <= 2).mean())
+
+
+def test_batch_pages_in_a_headless_browser(tmp_path):
+    pytest.importorskip("matplotlib", reason="matplotlib is not installed (pip install matplotlib)")
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    takes = tmp_path / "takes"
+    _synthetic(takes, 2, frames=300)
+    (takes / "noise.c3d").write_bytes(b"not a take" * 50)
+    out = tmp_path / "out"
+    # the hand solved on one take (its calibration takes most of the time), then the folder: synth0 is skipped
+    assert main(["batch", str(takes / "synth0.c3d"), "-o", str(out), "--html", "--solve-hand", "--quiet"]) == 0
+    assert main(["batch", str(takes), "-o", str(out), "--html", "--quiet"]) == 1  # noise fails
+    report = json.loads((out / "synth0.report.json").read_text())
+    assert report["outputs"]["html"] == "synth0.report.html"
+    page = (out / "synth0.report.html").read_text()
+    pictures = re.findall(r"id='(\w+)' alt='[^']*' src='data:image/png;base64,([^']+)'", page)
+    assert [p[0] for p in pictures] == ["labels", "rms"]
+    assert _has_green(base64.b64decode(pictures[0][1])) > 0.2  # the take is mostly confident
+    segments = report["summary"]["uncertain_segments"]
+    assert f"<td>{segments[0]['frame_start']}&ndash;{segments[0]['frame_end']}</td>" in page
+    if chromium is None:
+        pytest.skip("chromium is not installed (apt-get install chromium): pages checked without a browser")
+
+    def browse(path, *flags):
+        quiet = ["--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run"]
+        done = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", *quiet, "--hide-scrollbars",
+                               f"--user-data-dir={tmp_path / 'chromium'}", *flags, path.as_uri()],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        return done.stdout
+
+    dom = browse(out / "index.html", "--dump-dom")
+    links = re.findall(r'<a href="([^"]+)">(\w+)</a>', dom)
+    assert links == [("synth0.report.html", "synth0"), ("synth1.report.html", "synth1")]  # noise: no page
+    assert "not a C3D file" in dom and dom.count("<tr>") == 4
+    assert re.search(r"synth0</a></td><td>ok</td>(<td[^>]*>[^<]*</td>){5}<td[^>]*>\d+\.\d\d</td>", dom)  # RMS
+    dom = browse(out / "synth1.report.html", "--dump-dom")
+    assert '<a id="index" href="index.html">' in dom and '<a href="synth1.labeled.c3d">' in dom
+    shot = tmp_path / "shot.png"
+    browse(out / "synth1.report.html", f"--screenshot={shot}", "--window-size=1200,1400")
+    assert _has_green(shot.read_bytes()) > 0.05  # the browser drew the embedded picture
