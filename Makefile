@@ -62,6 +62,7 @@ bench: $(VENV)/.extras-$(BENCH_EXTRAS)
 	$(BIN)/python benchmarks/batch.py
 	$(BIN)/python benchmarks/review.py
 	$(BIN)/python benchmarks/fuzz.py
+	$(BIN)/python benchmarks/gap_fill.py
 
 ## models: retrain every shipped model (set, perm, cnn for han19 and glove13), seeded, then recalibrate
 ## the segment confidences; about 1.5 hours on 2 cores
