@@ -80,3 +80,22 @@ def test_batch_pages_in_a_headless_browser(tmp_path):
     shot = tmp_path / "shot.png"
     browse(out / "synth1.report.html", f"--screenshot={shot}", "--window-size=1200,1400")
     assert _has_green(shot.read_bytes()) > 0.05  # the browser drew the embedded picture
+
+
+def test_batch_page_shows_the_fills(tmp_path):
+    """batch --fill --html: the gaps the fill closed are drawn in the fill colour on the take's page."""
+    pytest.importorskip("matplotlib", reason="matplotlib is not installed (pip install matplotlib)")
+    import matplotlib.image
+    from mocap_autolabel.html_report import COLOURS
+
+    takes = tmp_path / "takes"
+    _synthetic(takes, 1, frames=600)
+    out = tmp_path / "out"
+    assert main(["batch", str(takes), "-o", str(out), "--html", "--fill", "--fill-method", "spline", "--quiet"]) == 0
+    report = json.loads((out / "synth0.report.json").read_text())
+    assert report["fill"]["filled"] > 0
+    page = (out / "synth0.report.html").read_text()
+    png = re.search(r"id='labels' alt='[^']*' src='data:image/png;base64,([^']+)'", page).group(1)
+    rgb = (matplotlib.image.imread(io.BytesIO(base64.b64decode(png)), format="png")[..., :3] * 255).round()
+    orange = np.array([int(COLOURS[FILLED][i:i + 2], 16) for i in (1, 3, 5)])
+    assert (np.abs(rgb - orange).max(axis=-1) <= 2).any()

@@ -336,22 +336,32 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
         t = time.perf_counter()
         out["outputs"]["html"] = os.path.basename(name) + ".report.html"
         _take_page(out | {"name": name, "file": os.path.abspath(path)}, labeling, take.first_frame, rms, sides,
-                   out_dir, settings)
+                   out_dir, settings, written.filled if settings.fill else None, written.names)
         timings["html"] = round(time.perf_counter() - t, 4)
     return out
 
 
 def _take_page(report: dict, labeling, first_frame: int, rms: list, sides: list[str], out_dir: str,
-               settings: BatchSettings) -> None:
-    """Write ``<name>.report.html``: the take's page, linking back to the batch's index.html."""
+               settings: BatchSettings, filled=None, filled_names: list[str] | None = None) -> None:
+    """Write ``<name>.report.html``: the take's page, linking back to the batch's index.html. ``filled``:
+    bool ``(F, N)`` fills of the written take whose points are ``filled_names`` (shown as filled)."""
+    import numpy as np
+
     from .core.atomic import atomic_output
     from .core.overview import label_classes
     from .html_report import take_page
 
+    fills = None
+    if filled is not None:
+        column = {n: i for i, n in enumerate(filled_names)}
+        fills = np.zeros((len(labeling.names), labeling.n_frames), dtype=bool)
+        for i, n in enumerate(labeling.names):
+            if n in column:
+                fills[i] = filled[:, column[n]]
     name = report["name"]
     index = os.path.relpath("index.html", os.path.dirname(name) or ".").replace(os.sep, "/")
     page = take_page(report | {"outputs": {k: v for k, v in report["outputs"].items() if k != "html"}},
-                     label_classes(labeling, settings.confident), labeling.names, first_frame,
+                     label_classes(labeling, settings.confident, fills), labeling.names, first_frame,
                      rms_mm=rms or None, rms_labels=[f"{s} hand" if s else "hand" for s in sides], index=index)
     with atomic_output(os.path.join(out_dir, name + ".report.html")) as tmp, open(tmp, "w", encoding="utf-8") as f:
         f.write(page)

@@ -114,7 +114,8 @@ def take_page(report: dict, classes: np.ndarray, names: list[str], first_frame: 
     if report.get("warning"):
         parts.append(f"<p class='warn' id='warning'>&#9888; {_e(report['warning'])}</p>")
     parts.append("<h2>Labels over time</h2><p>One row per label; white: no sample; dark grey: a gap inside the "
-                 "label's span; green: confident; light blue: uncertain; pink: very uncertain.</p>")
+                 "label's span; green: confident; light blue: uncertain; pink: very uncertain; orange: filled "
+                 "(a gap filled by --fill).</p>")
     parts.append(f"<img id='labels' alt='labels x frames of {_e(name)}, coloured by confidence' "
                  f"src='{classes_png(classes, names, first_frame)}'>")
     if rms_mm:
