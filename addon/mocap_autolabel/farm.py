@@ -55,10 +55,21 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
     if kind == "local":
         threads = str(threads_per_worker or max(1, (os.cpu_count() or 1) // int(where)))
         env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+        import dask
+
+        # Dask's nanny makes glibc hand freed memory back to the system at 64 KiB (its
+        # MALLOC_TRIM_THRESHOLD_): labeling allocates and frees large numpy temporaries, and paid
+        # for that in page faults (the same takes 15 % slower than in batch --jobs). glibc's own
+        # default instead; the thread caps as set above. Nor does a worker sample its own stack every
+        # 10 ms for Dask's profiler (a dashboard this cluster does not serve).
+        spawn_env = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()
+                     if k != "MALLOC_TRIM_THRESHOLD_"}
         for attempt in range(TRIES):  # a worker process that dies while the cluster starts fails the start
             try:
-                cluster = LocalCluster(n_workers=int(where), threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=logging.ERROR, env=env)
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": spawn_env,
+                                      "distributed.worker.profile.enabled": False}):
+                    cluster = LocalCluster(n_workers=int(where), threads_per_worker=1, processes=True,
+                                           dashboard_address=None, silence_logs=logging.ERROR, env=env)
                 break
             except (RuntimeError, OSError, TimeoutError) as exc:
                 if attempt == TRIES - 1:
