@@ -30,13 +30,15 @@ venv: $(VENV)/.extras-$(DEMO_EXTRAS)
 
 ## demo: the bundled raw synthetic take -> labels (set + trajectory voting, C3D + report) and a review scene
 ## (labeled markers keyed by confidence + the solved hand) -> a calibrated, solved hand rig (.blend, FBX, BVH,
-## report); also the raw take alone and beside the hand that made it; then a synthetic take of two interacting hands,
+## report) -> the labeled markers' gaps filled from that hand (out/demo_filled.c3d, fills marked as computed);
+## also the raw take alone and beside the hand that made it; then a synthetic take of two interacting hands,
 ## labeled (L_/R_ names, scored against its truth) into a review scene with both solved hands
 demo: $(VENV)/.extras-$(DEMO_EXTRAS)
 	$(BIN)/python -m mocap_autolabel info samples/demo_take.c3d
 	$(BIN)/python -m mocap_autolabel label samples/demo_take.c3d --layout han19 -o out/demo_labeled.c3d --report out/demo_report.json --blend out/demo_review.blend --solve-hand
 	$(BIN)/python -m mocap_autolabel info out/demo_labeled.c3d
 	$(BIN)/python -m mocap_autolabel solve out/demo_labeled.c3d --layout han19 --blend out/demo_hand.blend --fbx out/demo_hand.fbx --bvh out/demo_hand.bvh --report out/demo_hand.json --save-calibration out/demo_calibration.json
+	$(BIN)/python -m mocap_autolabel fill out/demo_labeled.c3d --layout han19 --calibration out/demo_calibration.json -o out/demo_filled.c3d --report out/demo_fill.json
 	$(BIN)/python -m mocap_autolabel import samples/demo_take.c3d --blend out/demo.blend --summary out/demo_summary.json
 	$(BIN)/python -m mocap_autolabel synth --layout han19 --frames 1200 --seed 1 -o out/demo_take.c3d --blend out/demo_truth.blend
 	$(BIN)/python -m mocap_autolabel synth --hands 2 --layout han19 --frames 1200 --seed 2 -o out/demo_two_hands.c3d
