@@ -60,13 +60,11 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
         # Dask's nanny makes glibc hand freed memory back to the system at 64 KiB (its
         # MALLOC_TRIM_THRESHOLD_): labeling allocates and frees large numpy temporaries, and paid
         # for that in page faults (the same takes 15 % slower than in batch --jobs). glibc's own
-        # default instead; the thread caps as set above. Nor does a worker sample its own stack every
+        # default instead (None unsets it); the thread caps as set above. Nor does a worker sample its own stack every
         # 10 ms for Dask's profiler (a dashboard this cluster does not serve).
-        spawn_env = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()
-                     if k != "MALLOC_TRIM_THRESHOLD_"}
         for attempt in range(TRIES):  # a worker process that dies while the cluster starts fails the start
             try:
-                with dask.config.set({"distributed.nanny.pre-spawn-environ": spawn_env,
+                with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                                       "distributed.worker.profile.enabled": False}):
                     cluster = LocalCluster(n_workers=int(where), threads_per_worker=1, processes=True,
                                            dashboard_address=None, silence_logs=logging.ERROR, env=env)
