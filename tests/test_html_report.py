@@ -99,3 +99,19 @@ def test_batch_page_shows_the_fills(tmp_path):
     rgb = (matplotlib.image.imread(io.BytesIO(base64.b64decode(png)), format="png")[..., :3] * 255).round()
     orange = np.array([int(COLOURS[FILLED][i:i + 2], 16) for i in (1, 3, 5)])
     assert (np.abs(rgb - orange).max(axis=-1) <= 2).any()
+
+
+def test_label_html_writes_the_takes_page(tmp_path):
+    """label --html: one take's page, as batch writes per take, with its fills and links to its files."""
+    pytest.importorskip("matplotlib", reason="matplotlib is not installed (pip install matplotlib)")
+    takes = tmp_path / "takes"
+    _synthetic(takes, 1, frames=600)
+    page = tmp_path / "pages" / "synth0.html"
+    page.parent.mkdir()
+    assert main(["label", str(takes / "synth0.c3d"), "--layout", "han19", "-o", str(tmp_path / "l.c3d"), "--fill",
+                 "--fill-method", "spline", "--html", str(page), "--quiet"]) == 0
+    text = page.read_text()
+    assert "<h1>synth0</h1>" in text and "<a href='../l.c3d'>" in text
+    png = re.search(r"id='labels' alt='[^']*' src='data:image/png;base64,([^']+)'", text).group(1)
+    assert _has_green(base64.b64decode(png)) > 0.2
+    assert main(["label", str(takes / "synth0.c3d"), "--layout", "han19", "--html", str(tmp_path / "x.txt")]) == 2

@@ -165,6 +165,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the performer's hand calibration for --validate (default: calibrated on this take)")
     _hand_arguments(lab)
     lab.add_argument("--report", metavar="REPORT.json", help="write counts, confidence, uncertain segments, timings")
+    lab.add_argument("--html", metavar="PAGE.html",
+                     help="also the take's report as one HTML page: labels x frames coloured by confidence (fills "
+                          "shown), the hand's RMS over time with --solve-hand, uncertain segments (needs matplotlib)")
     lab.add_argument("--labels", metavar="OUT.npz", help="write labels and confidences per frame and point slot")
     lab.add_argument("--blend", metavar="OUT.blend",
                      help="write a review scene: the raw take, labeled and unlabeled markers keyed by confidence "
@@ -508,6 +511,15 @@ def _label(args) -> int:
     if args.fill and not args.output:
         print("mocap_autolabel label: error: --fill needs -o OUT.c3d (the filled, labeled take)", file=sys.stderr)
         return EXIT_USAGE
+    if args.html:
+        from .html_report import MISSING as NO_MATPLOTLIB
+
+        if not args.html.lower().endswith((".html", ".htm")):
+            print(f"mocap_autolabel label: error: --html must name a .html file, got {args.html!r}", file=sys.stderr)
+            return EXIT_USAGE
+        if importlib.util.find_spec("matplotlib") is None:
+            print(f"error: {NO_MATPLOTLIB}", file=sys.stderr)
+            return EXIT_FAILED
     if args.blend and _bpy_or_none("label --blend") is None:
         return EXIT_USAGE
     bar = _ProgressBar.for_args(args)
@@ -628,6 +640,9 @@ def _label(args) -> int:
     try:
         if args.report:
             _write_report(args.report, report)
+        if args.html:
+            _label_page(args, report, labeling, take.first_frame, filled, solved)
+            print(f"  page     {args.html}")
         if args.labels:
             with atomic_output(args.labels) as tmp, open(tmp, "wb") as fh:
                 np.savez_compressed(fh, labels=labeling.per_sample(), confidence=labeling.per_sample_confidence(),
@@ -638,6 +653,37 @@ def _label(args) -> int:
     if not (args.output or args.blend or args.report or args.labels):
         print("  output   none written: give -o OUT.c3d for the labeled take (or --report, --labels, --blend)")
     return EXIT_OK
+
+
+def _label_page(args, report: dict, labeling, first_frame: int, filled, solved) -> None:
+    """``label --html``: the take's report as one HTML page (as batch writes per take), atomically."""
+    import numpy as np
+
+    from .core.atomic import atomic_output
+    from .core.overview import label_classes
+    from .html_report import take_page
+
+    fills = None
+    if filled is not None:  # the filled take's points are named: map them onto the labels
+        column = {n: i for i, n in enumerate(filled.take.names)}
+        fills = np.zeros((len(labeling.names), labeling.n_frames), dtype=bool)
+        for i, n in enumerate(labeling.names):
+            if n in column and filled.take.filled is not None:
+                fills[i] = filled.take.filled[:, column[n]]
+    rigs = solved if isinstance(solved, list) else ([("", solved)] if solved is not None else [])
+    rms = [one.report()["per_frame_rms_mm"] for _, one in rigs]
+    here = os.path.dirname(os.path.abspath(args.html))
+    outputs = {k: os.path.relpath(os.path.abspath(v), here).replace(os.sep, "/")
+               for k, v in (("labeled", args.output), ("report", args.report), ("blend", args.blend)) if v}
+    page_report = report | {"name": os.path.splitext(os.path.basename(args.file))[0], "layout": labeling.info["layout"],
+                            "frames": labeling.n_frames, "hands": labeling.info.get("hands", {}).get("count"),
+                            "outputs": outputs,
+                            "hand": {"marker_rms_mm": max(one.fit.overall_rms() for _, one in rigs) * 1000} if rigs
+                            else None}
+    page = take_page(page_report, label_classes(labeling, 0.95, fills), labeling.names, first_frame,
+                     rms_mm=rms or None, rms_labels=[f"{side} hand" if side else "hand" for side, _ in rigs])
+    with atomic_output(args.html) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        f.write(page)
 
 
 def _solve_progress(bar: _ProgressBar) -> dict:
