@@ -60,15 +60,19 @@ class Prop:
 def _pairs(positions: np.ndarray, tracklets: Tracklets, rate: float, sd: float,
            min_overlap_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The long tracklets (indices) and every pair of them sharing enough life: ``(long, i, j,
-    rigid)``, ``i < j`` indexing ``long``, ``rigid`` bool."""
+    rigid)``, ``i`` and ``j`` indexing ``long`` (each pair once), ``rigid`` bool."""
     min_frames = int(min_overlap_s * rate)
     long = np.flatnonzero(tracklets.stop - tracklets.start >= min_frames)
     sub = positions[::STEP]
     a, b, slot = tracklets.start[long], tracklets.stop[long], tracklets.slot[long]
     lo, hi = -(-a // STEP), -(-b // STEP)  # each long tracklet's range in the subsampled frames
     rows, cols, rigid = [], [], []
-    for i in range(len(long)):
-        j = np.arange(i + 1, len(long))
+    # Each pair once: in order of start, a tracklet with those that start later while it lives
+    # (time proportional to the pairs alive together, not to all pairs of a long take).
+    order = np.argsort(a, kind="stable")
+    first = a[order]
+    for p, i in enumerate(order):
+        j = order[p + 1:np.searchsorted(first, b[i] - min_frames + STEP, side="right")]  # + STEP: the test is below
         j = j[(np.minimum(hi[i], hi[j]) - np.maximum(lo[i], lo[j])) * STEP >= min_frames]
         if not len(j):
             continue
