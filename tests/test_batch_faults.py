@@ -64,15 +64,19 @@ def test_a_worker_killed_at_a_random_point_loses_nothing(undisturbed, tmp_path, 
     settings = BatchSettings(jobs=2) if mode == "jobs" else BatchSettings(scheduler="local:2")
     rng = np.random.default_rng(7)
     for run in range(2):
-        out = tmp_path / f"out{run}"
         delay = float(rng.uniform(0.2, 1.2))  # from the start of the run: workers starting, labeling, writing
+        for attempt in range(4):  # a run that ended before the kill is tried again, killed sooner
+            out = tmp_path / f"out{run}-{attempt}"
 
-        def batch(out=out):
-            return run_batch([str(undisturbed / "takes")], str(out), settings, progress="none")
+            def batch(out=out):
+                return run_batch([str(undisturbed / "takes")], str(out), settings, progress="none")
 
-        summary, killed = run_killing_a_worker(batch, delay, rng)
+            summary, killed = run_killing_a_worker(batch, delay, rng)
+            if killed:
+                break
+            delay /= 2
         rows = summary["takes_detail"]
-        assert killed, "the run ended before a worker was killed"
+        assert killed, "the run ended before a worker was killed, four times"
         assert all(r["status"] == "ok" for r in rows), (killed, rows)
         assert not [p for p in out.iterdir() if ".partial" in p.name]
         rerun = run_batch([str(undisturbed / "takes")], str(out), settings, progress="none")
