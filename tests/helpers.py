@@ -31,6 +31,24 @@ def import_take(bpy, path, tmp_path):
     return bpy.context.scene.mocap_autolabel.take
 
 
+def import_written(bpy, take, tmp_path, name: str):
+    """Write ``take`` as ``tmp_path/src/<name>.c3d`` and import it (:func:`import_take`); the new take."""
+    from mocap_autolabel.core.formats.c3d import write_c3d
+
+    path = tmp_path / "src" / f"{name}.c3d"
+    path.parent.mkdir(exist_ok=True)
+    write_c3d(take, path)
+    return import_take(bpy, path, tmp_path)
+
+
+def save_and_reopen(bpy, path):
+    """Save the scene as ``path``, empty Blender, open ``path`` again; the take the scene shows."""
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    return bpy.context.scene.mocap_autolabel.take
+
+
 def review_state(coll):
     """The review stored on a take's collection."""
     from mocap_autolabel.blender.review import load_state

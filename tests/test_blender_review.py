@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import save_and_reopen
 from mocap_autolabel.core.formats.c3d import write_c3d
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint
 from mocap_autolabel.core.layout import load_layout
@@ -245,11 +246,7 @@ def test_save_reopen_keeps_the_review(labeled, tmp_path):
     _select(bpy, labeled_objects(coll)[a])
     bpy.ops.mocap_autolabel.unlabel()
     before = state(coll)
-    path = tmp_path / "review.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    bpy.ops.wm.read_homefile(use_empty=True)
-    bpy.ops.wm.open_mainfile(filepath=str(path))
-    coll = bpy.context.scene.mocap_autolabel.take
+    coll = save_and_reopen(bpy, tmp_path / "review.blend")
     after = state(coll)
     assert after.review.constraints == before.review.constraints
     for key in ("slot", "start", "stop", "label", "locked"):

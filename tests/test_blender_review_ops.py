@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import import_take as _import
+from helpers import import_written
 from helpers import review_state as state
 from helpers import select as _select
 from mocap_autolabel.core.formats.c3d import write_c3d
@@ -100,10 +101,7 @@ def test_label_acts_on_the_panels_take_and_never_drops_corrections_silently(labe
     assert settings.layout == "han19"  # the Layout field follows the take (the one it was labeled with)
     settings.take = glove
     assert settings.layout == "glove13"
-    path = tmp_path / "src" / "glove1.c3d"
-    path.parent.mkdir()
-    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, path)
-    wrong = _import(bpy, path, tmp_path)
+    wrong = import_written(bpy, synthesize(load_layout("glove13"), 300, seed=1).take, tmp_path, "glove1")
     settings.layout = "han19"
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     for name, op in (("ThumbTip", bpy.ops.mocap_autolabel.lock), ("IndexTip", bpy.ops.mocap_autolabel.unlabel)):
@@ -300,10 +298,7 @@ def test_the_label_operators_own_properties_win_over_the_panels(empty_scene, bpy
     """On a glove13 take (labeling it with han19 only warns; a han19 take labeled with glove13 is
     refused now, no glove13 hand in it, which this test used before)."""
     bpy = bpy_module
-    path = tmp_path / "src" / "glove1.c3d"
-    path.parent.mkdir()
-    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, path)
-    coll = _import(bpy, path, tmp_path)
+    coll = import_written(bpy, synthesize(load_layout("glove13"), 300, seed=1).take, tmp_path, "glove1")
     settings = bpy.context.scene.mocap_autolabel
     assert settings.layout == "han19"
     assert bpy.ops.mocap_autolabel.label(layout="glove13") == {"FINISHED"}

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import import_take as _import
+from helpers import import_written, save_and_reopen
 from helpers import review_state as _state
 from helpers import select as _select
 from mocap_autolabel.core.formats.c3d import write_c3d
@@ -180,11 +181,7 @@ def test_save_and_reopen_keep_both_hands_then_solve_and_export(labeled, tmp_path
     bpy.context.scene.frame_set(index + int(coll["mocap_first"]))
     _select(bpy, _objects(coll)[lab.names.index("R_PinkyTip")])
     assert bpy.ops.mocap_autolabel.lock() == {"FINISHED"}
-    blend = tmp_path / "review.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
-    bpy.ops.wm.read_homefile(use_empty=True)
-    bpy.ops.wm.open_mainfile(filepath=str(blend))
-    coll = bpy.context.scene.mocap_autolabel.take
+    coll = save_and_reopen(bpy, tmp_path / "review.blend")
     state = _state(coll)
     assert state.labeling.names == lab.names and len(state.review.constraints) == 1
     assert [c.name for c in coll["mocap_labeled"].children] == ["Left hand", "Right hand"]
@@ -236,10 +233,7 @@ def test_a_held_prop_is_kept_out_of_the_hands_in_blender(empty_scene, bpy_module
 
     bpy = bpy_module
     synth = two_hand_take(load_layout("han19"), 1200, seed=1, config=TwoHandConfig(prop_markers=4))
-    (tmp_path / "in").mkdir()
-    path = tmp_path / "in" / "prop.c3d"
-    write_c3d(synth.take, path)
-    coll = _import(bpy, path, tmp_path)
+    coll = import_written(bpy, synth.take, tmp_path, "prop")
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     lab = _state(coll).labeling
     assert lab.info["props"]

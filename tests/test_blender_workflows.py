@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import data_path
 from helpers import review_state as _state
+from helpers import save_and_reopen
 from helpers import select as _select
 from mocap_autolabel.core.labeling import EMPTY, NULL
 
@@ -147,10 +148,7 @@ def test_two_takes_in_one_scene_a_bad_file_between_save_reopen_export(empty_scen
     _holds(glove)
 
     # Save, reopen: both reviews and both takes' corrections; continue on each.
-    blend = tmp_path / "two_takes.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
-    bpy.ops.wm.read_homefile(use_empty=True)
-    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    save_and_reopen(bpy, tmp_path / "two_takes.blend")
     scene = bpy.context.scene
     settings = scene.mocap_autolabel
     demo, glove = bpy.data.collections["demo_take"], bpy.data.collections["recording_part1"]
@@ -185,16 +183,12 @@ def test_two_takes_in_one_scene_a_bad_file_between_save_reopen_export(empty_scen
 def test_the_layout_is_picked_from_the_takes_shape_when_nobody_chose_one(empty_scene, bpy_module, tmp_path):
     """An unnamed glove13 take, labeled with the default layout (nobody chose one): the take's shape
     picks glove13, and Label says so; a layout the user chose is kept (and only warned about)."""
-    from helpers import import_take
-    from mocap_autolabel.core.formats.c3d import write_c3d
+    from helpers import import_written
     from mocap_autolabel.core.layout import load_layout
     from mocap_autolabel.core.synth.generate import synthesize
 
     bpy = bpy_module
-    path = tmp_path / "src" / "gloveless.c3d"
-    path.parent.mkdir()
-    write_c3d(synthesize(load_layout("glove13"), 600, seed=21).take, path)
-    coll = import_take(bpy, path, tmp_path)
+    coll = import_written(bpy, synthesize(load_layout("glove13"), 600, seed=21).take, tmp_path, "gloveless")
     settings = bpy.context.scene.mocap_autolabel
     assert settings.layout == "han19" and not settings.get("user_layout")
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}

@@ -336,28 +336,20 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
         t = time.perf_counter()
         out["outputs"]["html"] = os.path.basename(name) + ".report.html"
         _take_page(out | {"name": name, "file": os.path.abspath(path)}, labeling, take.first_frame, rms, sides,
-                   out_dir, settings, written.filled if settings.fill else None, written.names)
+                   out_dir, settings, written if settings.fill else None)
         timings["html"] = round(time.perf_counter() - t, 4)
     return out
 
 
 def _take_page(report: dict, labeling, first_frame: int, rms: list, sides: list[str], out_dir: str,
-               settings: BatchSettings, filled=None, filled_names: list[str] | None = None) -> None:
+               settings: BatchSettings, filled=None) -> None:
     """Write ``<name>.report.html``: the take's page, linking back to the batch's index.html. ``filled``:
-    bool ``(F, N)`` fills of the written take whose points are ``filled_names`` (shown as filled)."""
-    import numpy as np
-
+    the written take, when its gaps were filled (its fills are shown)."""
     from .core.atomic import atomic_output
-    from .core.overview import label_classes
+    from .core.overview import label_classes, label_fills
     from .html_report import take_page
 
-    fills = None
-    if filled is not None:
-        column = {n: i for i, n in enumerate(filled_names)}
-        fills = np.zeros((len(labeling.names), labeling.n_frames), dtype=bool)
-        for i, n in enumerate(labeling.names):
-            if n in column:
-                fills[i] = filled[:, column[n]]
+    fills = None if filled is None else label_fills(labeling.names, filled)
     name = report["name"]
     index = os.path.relpath("index.html", os.path.dirname(name) or ".").replace(os.sep, "/")
     page = take_page(report | {"outputs": {k: v for k, v in report["outputs"].items() if k != "html"}},
@@ -502,12 +494,19 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
 POOL_TRIES = 3
 
 
+def thread_caps(workers: int, threads: int | None = None) -> dict[str, str]:
+    """Environment variables that give each of ``workers`` processes sharing this machine's cores
+    ``threads`` threads (default: its share) for onnxruntime, OpenMP and OpenBLAS; read as those
+    start, so set before a worker process starts."""
+    n = str(threads or max(1, (os.cpu_count() or 1) // workers))
+    return dict.fromkeys(("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"), n)
+
+
 def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings, bar: Progress) -> list[dict]:
     """The takes in ``settings.jobs`` spawned processes; a pool whose process died (killed, out of memory) is
     started again for the takes not finished, each up to :data:`POOL_TRIES` times, then reported as failed."""
     rows: list[dict] = []
-    threads = str(max(1, (os.cpu_count() or 1) // settings.jobs))
-    env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+    env = thread_caps(settings.jobs)
     saved = {k: os.environ.get(k) for k in env}
     os.environ.update(env)  # spawned workers read these before numpy and onnxruntime start
     tries = dict.fromkeys((name for _, name in todo), 0)

@@ -657,19 +657,11 @@ def _label(args) -> int:
 
 def _label_page(args, report: dict, labeling, first_frame: int, filled, solved) -> None:
     """``label --html``: the take's report as one HTML page (as batch writes per take), atomically."""
-    import numpy as np
-
     from .core.atomic import atomic_output
-    from .core.overview import label_classes
+    from .core.overview import label_classes, label_fills
     from .html_report import take_page
 
-    fills = None
-    if filled is not None:  # the filled take's points are named: map them onto the labels
-        column = {n: i for i, n in enumerate(filled.take.names)}
-        fills = np.zeros((len(labeling.names), labeling.n_frames), dtype=bool)
-        for i, n in enumerate(labeling.names):
-            if n in column and filled.take.filled is not None:
-                fills[i] = filled.take.filled[:, column[n]]
+    fills = None if filled is None else label_fills(labeling.names, filled.take)
     rigs = solved if isinstance(solved, list) else ([("", solved)] if solved is not None else [])
     rms = [one.report()["per_frame_rms_mm"] for _, one in rigs]
     here = os.path.dirname(os.path.abspath(args.html))

@@ -53,9 +53,11 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
     except ImportError:
         raise FarmError(MISSING) from None
     if kind == "local":
-        threads = str(threads_per_worker or max(1, (os.cpu_count() or 1) // int(where)))
-        env = {k: threads for k in ("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
         import dask
+
+        from .batch import thread_caps
+
+        env = thread_caps(int(where), threads_per_worker)
 
         # Dask's nanny makes glibc hand freed memory back to the system at 64 KiB (its
         # MALLOC_TRIM_THRESHOLD_): labeling allocates and frees large numpy temporaries, and paid

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .labeling import Labeling
+from .take import Take
 
 #: Classes of :func:`label_classes`, in the order of :data:`CLASS_NAMES`.
 ABSENT, GAP, CONFIDENT, UNCERTAIN, VERY_UNCERTAIN, LOCKED, FILLED = range(7)
@@ -40,4 +41,18 @@ def label_classes(labeling: Labeling, confident: float = 0.95, filled: np.ndarra
     out[label[seg], frame] = cls[seg]
     if filled is not None:
         out[np.asarray(filled, dtype=bool) & (out == GAP)] = FILLED
+    return out
+
+
+def label_fills(names: list[str], take: Take) -> np.ndarray | None:
+    """bool ``(labels, frames)``: the samples of each of ``names`` that a gap filler made up in
+    ``take`` (its points named as the labels; :attr:`.take.Take.filled`), for :func:`label_classes`'s
+    ``filled``; None when the take marks no fills."""
+    if take.filled is None:
+        return None
+    column = {n: i for i, n in enumerate(take.names)}
+    out = np.zeros((len(names), take.n_frames), dtype=bool)
+    for i, name in enumerate(names):
+        if name in column:
+            out[i] = take.filled[:, column[name]]
     return out

@@ -23,7 +23,7 @@ from .labelers import METHODS, FrameBatch, Labeler, make_labeler, pack_frames
 from .labelers.assign import assign, row_log_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
 from .layout import Layout
-from .props import Prop, find_props, prop_mask, rigid_parts
+from .props import Prop, find_props, prop_mask
 from .take import Take
 from .temporal.confidence import (
     load_calibration,
@@ -442,9 +442,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             always get one (default ``L_``/``R_`` prefixes); one hand keeps plain names unless given.
         keep_named: points the file already names that are not ``layout``'s markers (a labeled
             body, a named prop) are kept out of the hands and stay null; False offers them too.
-        props: look for rigid props among the trajectories (:mod:`.props`): a rigid group that
-            took labels but is no rigid part of a hand is kept out and the take labeled again;
-            ``info["props"]`` lists them.
+        props: look for rigid props among the trajectories (:mod:`.props`): a rigid group the
+            labeler mostly left null, some of which took hand labels, is kept out and the take
+            labeled again; ``info["props"]`` lists them.
         exclude: bool ``(F, P)``: samples kept out of the hands (null), e.g. a prop's.
 
     Returns:
@@ -554,8 +554,14 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     info["continuity"] = [float(v) for v in continuity]
 
     f_idx, k_idx = np.nonzero(mask)
-    member = None if found.count == 1 else \
-        np.stack([found.members(h)[f_idx, slots[f_idx, k_idx]] for h in range(2)], axis=1)
+
+    def offered_to() -> np.ndarray | None:
+        """bool ``(n, hands)``: the hands each scored sample is offered to (None: one hand)."""
+        if found.count == 1:
+            return None
+        return np.stack([found.members(h)[f_idx, slots[f_idx, k_idx]] for h in range(2)], axis=1)
+
+    member = offered_to()
 
     def decide(scores: np.ndarray, first: Labeling | None = None, samples: Samples | None = None) -> Labeling:
         return _decide(scores, batch, take, hand_labels, method, temporal, segments, locked_at, info, score, p, q,
@@ -581,7 +587,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                     hand_scores[h][changed] = _hand_scores(take_in, layout, found.members(h), batch, labeler, changed)
             joint = joint.copy()
             joint[rows] = _joint_scores(hand_scores, found, batch, rows)
-            member = np.stack([found.members(h)[f_idx, slots[f_idx, k_idx]] for h in range(2)], axis=1)
+            member = offered_to()
             scores = _apply_constraints(joint, slots, mask, constraints)
             labeling = decide(scores, first=labeling, samples=score_samples(scores, batch, rows, samples))
             times["hands_again"] = time.perf_counter() - t
@@ -620,7 +626,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                 return single
     if props and temporal == "vote":
         t = time.perf_counter()
-        found_props = _props(take, tracklets, labeling, hand_labels)
+        found_props = _props(take, tracklets, labeling, len(hand_labels))
         times["props"] = time.perf_counter() - t
         if found_props:
             say(f"labeling again without {len(found_props)} rigid prop(s)")
@@ -637,20 +643,16 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     return labeling
 
 
-def _props(take: Take, tracklets, labeling: Labeling, labels: _HandLabels) -> list[Prop]:
+def _props(take: Take, tracklets, labeling: Labeling, n_labels: int) -> list[Prop]:
     """The rigid props of a labeled take (:func:`.props.find_props`), judged by the labels its
     trajectories mostly took."""
     per = labeling.per_sample()
     ids = tracklets.id_map(take.n_frames, take.n_points)
     f, p = np.nonzero(ids >= 0)
-    n_labels = len(labels)
     votes = np.bincount(ids[f, p].astype(np.int64) * (n_labels + 1) + (per[f, p].astype(np.int64) + 1),
                         minlength=len(tracklets) * (n_labels + 1)).reshape(len(tracklets), n_labels + 1)
-    tracklet_label = votes.argmax(axis=1) - 1
-    one = rigid_parts(rigid_pairs(labels.layout).pairs, labels.m)
-    parts = np.concatenate([one + h * (one.max() + 1) for h in range(labels.hands)])
     positions = np.where(take.valid[..., None], take.positions, np.nan)
-    return find_props(positions, tracklets, take.rate, tracklet_label, parts)
+    return find_props(positions, tracklets, take.rate, votes.argmax(axis=1) - 1)
 
 
 def score_samples(scores: np.ndarray, batch: FrameBatch, rows: np.ndarray | None = None,
@@ -721,7 +723,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
             rows = [None] if member is None else [np.flatnonzero(member[:, h]) for h in range(labels.hands)]
             if with_rigid:
                 rigid = take_distances(rigid, at, samples.frame, per, n_labels)
-                for h, sel in enumerate(rows):
+                for h, sel in enumerate(rows):  # one entry per hand
                     extra += partner_logp(at, samples.frame, per, n_labels, labels.hand_pairs(rigid, h), *partner,
                                           rows=sel)
             if with_continuity:
@@ -732,7 +734,7 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
                     own = np.where((per >= h * m) & (per < (h + 1) * m), per - h * m, NULL)
                     extra[:, h * m:(h + 1) * m] += continuity_logp(at, samples.frame, samples.slot, own, held_for,
                                                                    segments, m, take.rate, *continuity,
-                                                                   rows=rows[min(h, len(rows) - 1)])[:, :m]
+                                                                   rows=rows[h])[:, :m]
             if extra.any() or first is not None:
                 stopped = facts["time_limited"]
                 decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))

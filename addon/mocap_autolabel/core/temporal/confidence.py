@@ -52,7 +52,7 @@ def segment_evidence(labeling, samples) -> np.ndarray:
     m = samples.logp.shape[1] - 1
     label = labeling.label[seg].astype(np.int64)
     col = np.where(label < 0, m, label)
-    lp = samples.logp if len(rows) == len(seg) == len(samples.frame) else samples.logp[rows]
+    lp = samples.logp if len(rows) == len(samples.frame) else samples.logp[rows]  # no copy when all are in
     chosen = lp[np.arange(len(rows)), col].astype(np.float64)
     # The best other column: the row's best, or its second best where the label is the best.
     top = np.argmax(lp, axis=1)
