@@ -18,8 +18,12 @@ from mocap_autolabel.core.hands import (
     decide_sides,
     find_hands,
     hands_in_names,
+    identity_swaps,
+    relabel_options,
     side_evidence,
     split_hands,
+    swap_frames,
+    swap_ranges,
 )
 from mocap_autolabel.core.labeling import Constraint, labeled_take
 from mocap_autolabel.core.layout import load_layout
@@ -119,6 +123,47 @@ def test_joint_side_decision_never_calls_both_hands_right():
     assert sorted(sides) == ["left", "right"] and "warning" in facts
     sides, facts = decide_sides([SideEvidence(left=30, right=2), SideEvidence(left=1, right=50)])
     assert sides == ["left", "right"] and "warning" not in facts and facts["confidence"] > 0.99
+
+
+def test_identity_swaps_follow_the_handedness_where_the_hands_can_trade():
+    frames = 600
+    right = np.tile(np.array([-1, 1], dtype=np.int8), (frames, 1))  # hand 0 left, hand 1 right
+    right[300:450] *= -1  # the tracker carried each hand on with the other
+    right[100:104] *= -1  # a labeling's few mistakes
+    right[500:520] = 0  # handedness unseen
+    centre = np.zeros((frames, 2, 3))
+    centre[:, 1, 0] = 0.3
+    centre[[100, 104, 300, 450], 1, 0] = 0.05  # the hands touch here only
+    assert swap_ranges(identity_swaps(right, centre)) == [[300, 450]]
+    far = centre.copy()
+    far[:, 1, 0] = 0.3
+    assert not identity_swaps(right, far).any()  # hands that never meet never trade places
+    lost = far.copy()
+    lost[300, 1] = np.nan  # ... unless one is lost there
+    assert swap_ranges(identity_swaps(right, lost)) == [[300, 600]]
+    assert swap_frames([[300, 450]], frames).sum() == 150
+
+
+def test_hands_that_trade_places_where_they_touch_keep_their_sides(han19):
+    """A long take of interacting hands where the tracker carries each hand's identity on with
+    the other for a third of the take (seen before the fix: 66 % of instances right)."""
+    two = two_hand_take(han19, 3000, seed=1)
+    take, truth = two.take, two.labels
+    m = len(han19)
+    lab = label_take(take, han19)
+    swaps = lab.info["hands"]["swaps"]
+    assert swaps and all(b - a >= 100 for a, b in swaps)
+    per = lab.per_sample()
+    ok = take.valid & (truth >= 0) & (per >= 0)
+    assert ((truth[ok] < m) == (per[ok] < m)).mean() > 0.99  # every sample on its own hand
+    assert _accuracy(lab, take, truth, 2 * m) > 0.98
+    assert relabel_options(lab.info)["hand_swaps"] == swaps
+    # Labeled again with a correction (as a reviewer's re-solve does), the hands stay traded.
+    f, p = map(int, np.argwhere(ok)[0])
+    again = label_take(take, han19, constraints=[Constraint(p, f, f + 1, int(per[f, p]))],
+                       **relabel_options(lab.info))
+    assert again.info["hands"]["swaps"] == swaps
+    assert (again.per_sample()[take.valid] == per[take.valid]).mean() > 0.99
 
 
 def test_chirality_tells_a_mirrored_hand(han19):

@@ -18,7 +18,18 @@ import numpy as np
 from .errors import MocapInputError
 from .hand.calibrate import Calibration, calibrate
 from .hand.ik import GATE, MIN_MARKERS, Fit
-from .hands import HandNaming, Hands, decide_sides, find_hands, replace_valid, side_evidence
+from .hands import (
+    HandNaming,
+    Hands,
+    SideEvidence,
+    decide_sides,
+    find_hands,
+    handedness,
+    identity_swaps,
+    replace_valid,
+    swap_frames,
+    swap_ranges,
+)
 from .labelers import METHODS, FrameBatch, Labeler, make_labeler, pack_frames
 from .labelers.assign import assign, row_log_probabilities
 from .labeling import EMPTY, NULL, Constraint, Labeling, layout_markers, segments_from_runs
@@ -98,14 +109,15 @@ def _crossings(take: Take) -> dict[int, list[int]]:
 _HANDS: dict[tuple, Hands] = {}
 
 
-def _hands(take: Take, layout: Layout, hands: str | int, ignore: np.ndarray | None) -> Hands:
+def _hands(take: Take, layout: Layout, hands: str | int, ignore: np.ndarray | None,
+           swaps: np.ndarray | None = None) -> Hands:
     """:func:`.hands.find_hands`, remembered for the last few takes (a copy: callers change ``both``)."""
     key = (*_take_key(take), tuple(layout.names), str(hands),
-           None if ignore is None else ignore.tobytes())
+           None if ignore is None else ignore.tobytes(), None if swaps is None else swaps.tobytes())
     if key not in _HANDS:
         while len(_HANDS) >= 4:
             _HANDS.pop(next(iter(_HANDS)))
-        _HANDS[key] = find_hands(take, layout, hands, ignore=ignore)
+        _HANDS[key] = find_hands(take, layout, hands, ignore=ignore, swaps=swaps)
     found = _HANDS[key]
     return replace(found, both=found.both.copy(), hand=found.hand.copy(), info=dict(found.info))
 
@@ -300,6 +312,40 @@ def _hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBa
     return out
 
 
+#: One take's per-hand scores with the points each hand was offered: labeling the take again
+#: (the hands traded places; a reviewer's re-solve) scores only the frames whose points changed.
+_HAND_SCORES: dict[tuple, list[tuple[np.ndarray, np.ndarray]]] = {}
+#: Bytes of scores kept at most (a long take's are scored afresh rather than held).
+HAND_SCORES_BYTES = 256 * 2 ** 20
+
+
+def _all_hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBatch,
+                     labeler: Labeler) -> np.ndarray:
+    """:func:`_hand_scores` of every frame, re-using the scores of the last take labeled where a
+    hand was offered the same points (the frames where it was not are scored again)."""
+    key = (*_take_key(take), getattr(labeler, "path", id(labeler)), batch.mask.shape, tuple(layout.names))
+    kept = _HAND_SCORES.get(key, [])
+    best, changed = None, None
+    for old_members, old_scores in kept:
+        rows = np.flatnonzero((old_members != members).any(axis=1))
+        if changed is None or len(rows) < len(changed):
+            best, changed = old_scores, rows
+    if best is None or len(changed) > 0.5 * len(members):
+        scores = _hand_scores(take, layout, members, batch, labeler, np.arange(take.n_frames))
+    else:
+        scores = best.copy()
+        if len(changed):
+            scores[changed] = _hand_scores(take, layout, members, batch, labeler, changed)
+    if scores.nbytes * 4 <= HAND_SCORES_BYTES:  # both hands, before and after a second look
+        if key not in _HAND_SCORES:
+            _HAND_SCORES.clear()
+            _HAND_SCORES[key] = []
+        entries = _HAND_SCORES[key]
+        entries.append((members.copy(), scores))
+        del entries[:-4]
+    return scores
+
+
 def _joint_scores(hand_scores: Sequence[np.ndarray], found: Hands, batch: FrameBatch,
                   rows: np.ndarray) -> np.ndarray:
     """Joint per-frame scores ``(R, K, 2M + 1)`` of the ``rows`` of a two-hand take from each hand's
@@ -342,10 +388,26 @@ def _offer_nulls(found: Hands, labeling: Labeling, take: Take) -> tuple[int, np.
     return int(len(chosen)), np.flatnonzero(offer.any(axis=1))
 
 
+def _handedness(take: Take, layout: Layout, labeling: Labeling, hands: int) -> np.ndarray:
+    """int8 ``(F, hands)``: the handedness of each hand's labeled markers per frame
+    (:func:`.hands.handedness`; 0 throughout for a layout of fewer than four markers)."""
+    m = len(layout)
+    per = labeling.per_sample()
+    right = np.zeros((take.n_frames, hands), dtype=np.int8)
+    if m < 4:
+        return right
+    for h in range(hands):
+        observed = np.full((take.n_frames, m, 3), np.nan)
+        f, p = np.nonzero((per >= h * m) & (per < (h + 1) * m))
+        observed[f, per[f, p] - h * m] = take.positions[f, p]
+        right[:, h] = handedness(observed, layout)
+    return right
+
+
 def _name_hands(take: Take, layout: Layout, labeling: Labeling, found: Hands, sides: Sequence[str] | None,
-                naming: HandNaming | None) -> Labeling:
+                naming: HandNaming | None, swaps: np.ndarray | None) -> Labeling:
     """Decide the sides of the hands, put the left hand's labels first and name them; facts in
-    ``info["hands"]``."""
+    ``info["hands"]`` (with ``swaps``, the frames where the hands found traded places)."""
     from .hands import DEFAULT_NAMING, sided_layout_names
 
     m = len(layout)
@@ -355,14 +417,12 @@ def _name_hands(take: Take, layout: Layout, labeling: Labeling, found: Hands, si
     if found.count == 1 and naming is None and sides is None:
         labeling.info["hands"] = facts
         return labeling
-    per = labeling.per_sample()
-    evidence = []
-    for h in range(found.count):
-        observed = np.full((take.n_frames, m, 3), np.nan)
-        f, p = np.nonzero((per >= h * m) & (per < (h + 1) * m))
-        observed[f, per[f, p] - h * m] = take.positions[f, p]
-        evidence.append(side_evidence(observed, layout))
+    right = _handedness(take, layout, labeling, found.count)
+    evidence = [SideEvidence(left=int((r < 0).sum()), right=int((r > 0).sum())) if r.any() else None
+                for r in right.T]
     side_list, side_facts = decide_sides(evidence, None if sides is None else list(sides))
+    if swaps is not None and swaps.any():
+        facts["swaps"] = swap_ranges(swaps)
     facts.update(side_facts)
     facts["by_hand_order"] = list(side_list)
     if found.count == 2:
@@ -390,7 +450,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                progress: Callable[[str], None] | None = None,
                done: Callable[[float], None] | None = None, hands: str | int = "auto",
                sides: Sequence[str] | None = None, naming: HandNaming | str | None = None,
-               keep_named: bool = True, props: bool = True, exclude: np.ndarray | None = None) -> Labeling:
+               keep_named: bool = True, props: bool = True, exclude: np.ndarray | None = None,
+               hand_swaps: Sequence[Sequence[int]] | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -446,6 +507,11 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             labeler mostly left null, some of which took hand labels, is kept out and the take
             labeled again; ``info["props"]`` lists them.
         exclude: bool ``(F, P)``: samples kept out of the hands (null), e.g. a prop's.
+        hand_swaps: frame ranges ``[start, stop)`` where the two hands found trade places (where
+            they touch, the tracker of :func:`.hands.find_hands` can carry each hand's identity on
+            with the other). None: found from a first labeling's handedness
+            (:func:`.hands.identity_swaps`), and where there are any the take is labeled again
+            with them; ``info["hands"]["swaps"]`` lists them. ``()``: none.
 
     Returns:
         the :class:`Labeling`; ``info`` holds the settings and the time of each stage, and
@@ -478,7 +544,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if exclude is not None:
         ignore = exclude | (False if ignore is None else ignore[None, :])
     say("finding hands")
-    found = _hands(take, layout, hands, ignore)
+    swaps = None if hand_swaps is None else swap_frames(hand_swaps, take.n_frames)
+    found = _hands(take, layout, hands, ignore, swaps)
     times["hands"] = time.perf_counter() - t0
     if found.count == 2 and method not in JOINT_METHODS:
         raise ValueError(f"two hands are labeled with {', '.join(JOINT_METHODS)}, not {method!r} "
@@ -489,8 +556,12 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     check_constraints(constraints, len(hand_labels))
     if found.count == 2 and constraints and sides is None:
         # Corrections name final labels (left hand first): the sides must be known before the vote.
-        sides = label_take(take, layout, method, temporal, model=model, hands=2, keep_named=keep_named,
-                           naming=naming).info["hands"]["by_hand_order"]
+        first = label_take(take, layout, method, temporal, model=model, hands=2, keep_named=keep_named,
+                           naming=naming, hand_swaps=hand_swaps).info["hands"]
+        sides = first["by_hand_order"]
+        if swaps is None:
+            swaps = swap_frames(first.get("swaps", []), take.n_frames)
+            found = _hands(take, layout, hands, ignore, swaps)
     order = _hand_order(sides) if found.count == 2 and sides is not None else None
     if order is not None:
         constraints = [replace(c, label=hand_labels.to_internal(c.label, order)) for c in constraints]
@@ -510,7 +581,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if found.count == 2:
         labeler = labeler or make_labeler(method, layout, model)
         every = np.arange(take.n_frames)
-        hand_scores = [_hand_scores(take_in, layout, found.members(h), batch, labeler, every) for h in range(2)]
+        hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler) for h in range(2)]
         joint = scores = _joint_scores(hand_scores, found, batch, every)
     else:
         labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
@@ -573,24 +644,43 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     samples = score_samples(scores, batch)
     labeling = decide(scores, samples=samples)
     times["temporal"] = time.perf_counter() - t
+
+    def traded_places() -> Labeling | None:
+        """Where the hands touched, the tracker may have carried each hand's identity on with the
+        other: the labeled markers' handedness says where; then the take is labeled again."""
+        if found.count != 2 or swaps is not None:
+            return None
+        traded = identity_swaps(_handedness(take, layout, labeling, 2), found.centre)
+        if not traded.any():
+            return None
+        say("labeling again: the hands traded places where they touched")
+        again = label_take(**{**args, "hand_swaps": swap_ranges(traded), "labeler": labeler})
+        again.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
+        again.info["seconds"]["traded_places"] = round(sum(times.values()), 4)
+        share(1.0)
+        return again
+
+    again = traded_places()  # before more work is spent on this labeling
+    if again is not None:
+        return again
     if found.count == 2:
         # A marker given to the wrong hand is one its labeler rejects: trajectories left null near
         # the other hand are offered to both hands, and both are labeled again.
-        before = [found.members(h) for h in range(2)]
         offered, rows = _offer_nulls(found, labeling, take_in)
         if offered:
             say("temporal step: both hands again")
             t = time.perf_counter()
-            for h in range(2):  # a hand whose points did not change keeps its scores
-                changed = np.flatnonzero((found.members(h) != before[h]).any(axis=1))
-                if len(changed):
-                    hand_scores[h][changed] = _hand_scores(take_in, layout, found.members(h), batch, labeler, changed)
+            # A hand whose points did not change keeps its scores.
+            hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler) for h in range(2)]
             joint = joint.copy()
             joint[rows] = _joint_scores(hand_scores, found, batch, rows)
             member = offered_to()
             scores = _apply_constraints(joint, slots, mask, constraints)
             labeling = decide(scores, first=labeling, samples=score_samples(scores, batch, rows, samples))
             times["hands_again"] = time.perf_counter() - t
+            again = traded_places()  # the hands' second look labels more of a hand that traded places
+            if again is not None:
+                return again
         info["hands_offered_again"] = offered
     share(decided)
     if validate:
@@ -606,7 +696,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                               "downgraded_segments": downgrade(labeling, residuals)}
         times["validate"] = time.perf_counter() - t
     t = time.perf_counter()
-    labeling = _name_hands(take, layout, labeling, found, sides, naming)
+    labeling = _name_hands(take, layout, labeling, found, sides, naming, swaps)
     times["sides"] = time.perf_counter() - t
     if found.count == 2 and str(hands) == "auto" and not constraints:
         # Two hands must explain the take better than one: a hand with more markers than the
