@@ -87,10 +87,11 @@ def same_outputs(a, b) -> list[str]:
 
 
 def worker_processes() -> list[int]:
-    """Process ids of this process's children started by multiprocessing's spawn (pool and Dask workers)."""
+    """Process ids of this process's worker processes: children started by multiprocessing's spawn
+    (``batch --jobs``), and children of its fork server (a local Dask cluster's workers)."""
     import os
 
-    me, found = os.getpid(), []
+    me, procs = os.getpid(), []
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue
@@ -101,9 +102,10 @@ def worker_processes() -> list[int]:
                 cmd = f.read()
         except (OSError, ValueError, IndexError):
             continue
-        if ppid == me and b"spawn_main" in cmd:
-            found.append(int(entry))
-    return found
+        procs.append((int(entry), ppid, cmd))
+    servers = {pid for pid, ppid, cmd in procs if ppid == me and b"forkserver" in cmd}
+    return [pid for pid, ppid, cmd in procs
+            if (ppid == me and b"spawn_main" in cmd) or ppid in servers]
 
 
 def run_killing_a_worker(run, delay: float, rng) -> tuple[object, bool]:

@@ -11,6 +11,7 @@ else in the package imports it.
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import logging
 import os
 import re
@@ -48,16 +49,18 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
     onnxruntime (default: this machine's cores shared among them).
     """
     kind, where = parse_scheduler(scheduler)
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise FarmError(MISSING) from None
+    if importlib.util.find_spec("distributed") is None:
+        raise FarmError(MISSING)
     if kind == "local":
-        import dask
-
         from .batch import thread_caps
 
         env = thread_caps(int(where), threads_per_worker)
+        with _environ(env):  # the workers' thread caps, read as numpy and onnxruntime load
+            _start_forkserver()  # it imports while this process imports Dask
+    from distributed import Client, LocalCluster
+
+    if kind == "local":
+        import dask
 
         # Dask's nanny makes glibc hand freed memory back to the system at 64 KiB (its
         # MALLOC_TRIM_THRESHOLD_): labeling allocates and frees large numpy temporaries, and paid
@@ -67,7 +70,9 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
         for attempt in range(TRIES):  # a worker process that dies while the cluster starts fails the start
             try:
                 with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
-                                      "distributed.worker.profile.enabled": False}):
+                                      "distributed.worker.profile.enabled": False,
+                                      "distributed.worker.multiprocessing-method": "forkserver",
+                                      "distributed.scheduler.worker-saturation": 1.0}):
                     cluster = LocalCluster(n_workers=int(where), threads_per_worker=1, processes=True,
                                            dashboard_address=None, silence_logs=logging.ERROR, env=env)
                 break
@@ -83,6 +88,45 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
         raise FarmError(f"cannot reach the Dask scheduler at {where}: {exc}") from None
     with client:
         yield client
+
+
+@contextlib.contextmanager
+def _environ(env: dict[str, str]) -> Iterator:
+    """``env`` in ``os.environ`` for a while (a process started meanwhile inherits it)."""
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+#: What the local cluster's fork server imports once, before it forks each worker: a worker then
+#: starts without importing Dask and the labeling (about 0.6 s of CPU each, on this 2-core machine
+#: most of what a local cluster cost beyond ``batch --jobs``).
+PRELOAD = ["distributed", "numpy", "scipy.optimize", "scipy.sparse", "onnxruntime", "mocap_autolabel.batch",
+           "mocap_autolabel.core.pipeline"]
+
+
+def _start_forkserver() -> None:
+    """Start multiprocessing's fork server with :data:`PRELOAD`: the local cluster's workers are
+    forked from it (``distributed.worker.multiprocessing-method``), a single-threaded process,
+    unlike this one."""
+    import multiprocessing
+    from multiprocessing import forkserver
+
+    # One started for an earlier cluster of this process has that moment's environment (another
+    # cluster's thread caps): stopped (CPython 3.8+), and a new one started. Left running at the
+    # end of a run, it ends with this process.
+    stop = getattr(forkserver._forkserver, "_stop", None)
+    if stop is not None:
+        stop()
+    multiprocessing.get_context("forkserver").set_forkserver_preload(PRELOAD)
+    forkserver.ensure_running()
 
 
 def worker_threads(client) -> int:
