@@ -11,6 +11,7 @@ Only the standard library at import time: the work happens in :func:`process_tak
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import errno
@@ -22,6 +23,7 @@ import os
 import sys
 import time
 import tomllib
+from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -502,15 +504,27 @@ def thread_caps(workers: int, threads: int | None = None) -> dict[str, str]:
     return dict.fromkeys(("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"), n)
 
 
+@contextlib.contextmanager
+def environ(env: dict[str, str]) -> Iterator[None]:
+    """``env`` in ``os.environ`` for a while (a process started meanwhile inherits it)."""
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
 def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings, bar: Progress) -> list[dict]:
     """The takes in ``settings.jobs`` spawned processes; a pool whose process died (killed, out of memory) is
     started again for the takes not finished, each up to :data:`POOL_TRIES` times, then reported as failed."""
     rows: list[dict] = []
-    env = thread_caps(settings.jobs)
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)  # spawned workers read these before numpy and onnxruntime start
     tries = dict.fromkeys((name for _, name in todo), 0)
-    try:
+    with environ(thread_caps(settings.jobs)):  # spawned workers read these before numpy and onnxruntime start
         context = multiprocessing.get_context("spawn")
         while todo:
             broken = []
@@ -534,12 +548,6 @@ def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings
                 else:
                     rows.append(_finish(bar, failed_report(path, name, out_dir, f"its worker process died on "
                                                            f"each of {POOL_TRIES} tries (killed, or out of memory)")))
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
     return rows
 
 

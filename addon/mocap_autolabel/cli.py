@@ -329,6 +329,9 @@ def _hands_line(labeling, confident: float = 0.95) -> str | None:
     forced = " (two forced, one found)" if facts.get("forced") == 2 else ""
     line = (f"{count} hand{'s' if count > 1 else ''}{forced}: " + "; ".join(parts)
             + f" (sides {100 * facts.get('confidence', 0):.0f} % sure)")
+    if facts.get("swaps"):  # where the hands touched, the tracker had them the wrong way round
+        line += ("; hands traded places where they touched, put back in frames "
+                 + ", ".join(f"{a}-{b - 1}" for a, b in facts["swaps"]))
     if facts.get("warning"):
         line += f"\n  warning  {facts['warning']}"
     return line

@@ -52,10 +52,10 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
     if importlib.util.find_spec("distributed") is None:
         raise FarmError(MISSING)
     if kind == "local":
-        from .batch import thread_caps
+        from .batch import environ, thread_caps
 
         env = thread_caps(int(where), threads_per_worker)
-        with _environ(env):  # the workers' thread caps, read as numpy and onnxruntime load
+        with environ(env):  # the workers' thread caps, read as numpy and onnxruntime load
             _start_forkserver()  # it imports while this process imports Dask
     from distributed import Client, LocalCluster
 
@@ -88,21 +88,6 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
         raise FarmError(f"cannot reach the Dask scheduler at {where}: {exc}") from None
     with client:
         yield client
-
-
-@contextlib.contextmanager
-def _environ(env: dict[str, str]) -> Iterator:
-    """``env`` in ``os.environ`` for a while (a process started meanwhile inherits it)."""
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
 
 
 #: What the local cluster's fork server imports once, before it forks each worker: a worker then
