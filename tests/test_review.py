@@ -185,7 +185,8 @@ def test_labeling_again_keeps_two_hands_and_their_sides_unless_told():
                      "naming": "{Side}Hand:{name}"}}
     one = {"hands": {"count": 1}}
     options, names, changed = relabel_plan(two, layout)
-    assert options == {"hands": 2, "sides": ["right", "left"], "naming": HandNaming("{Side}Hand:{name}")}
+    assert options == {"hands": 2, "sides": ["right", "left"], "naming": HandNaming("{Side}Hand:{name}"),
+                       "hand_swaps": []}  # the hands traded places nowhere: not looked for again
     assert names[0] == "LeftHand:ThumbCMC" and names[19] == "RightHand:ThumbCMC" and not changed
     assert relabel_plan(two, layout, "2")[0] == options
     assert relabel_plan(two, layout, "1") == ({"hands": 1}, layout.names, True)
