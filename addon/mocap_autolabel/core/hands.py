@@ -39,7 +39,7 @@ import numpy as np
 from .errors import MocapInputError
 from .layout import Layout
 from .take import Take
-from .tracklets import find_tracklets
+from .tracklets import find_tracklets, mask_runs
 
 #: Metres: a marker farther than this from its hand's centre is not of that hand.
 HAND_RADIUS = 0.16
@@ -390,6 +390,13 @@ class SideEvidence:
     left: int
     right: int
 
+    @classmethod
+    def of(cls, frames: np.ndarray | None) -> SideEvidence | None:
+        """The votes of per-frame :func:`handedness` ``(F,)``; None where no frame has one."""
+        if frames is None or not frames.any():
+            return None
+        return cls(left=int((frames < 0).sum()), right=int((frames > 0).sum()))
+
     @property
     def side(self) -> str:
         return "left" if self.left > self.right else "right"
@@ -453,10 +460,7 @@ def handedness(observed: np.ndarray, layout: Layout) -> np.ndarray | None:
 def side_evidence(observed: np.ndarray, layout: Layout) -> SideEvidence | None:
     """Handedness of ``observed (F, M, 3)`` labeled markers over the take (:func:`handedness`);
     None where no frame sees the chiral tetrahedron."""
-    frames = handedness(observed, layout)
-    if frames is None or not frames.any():
-        return None
-    return SideEvidence(left=int((frames < 0).sum()), right=int((frames > 0).sum()))
+    return SideEvidence.of(handedness(observed, layout))
 
 
 #: Nats one frame's handedness of one hand counts for, in :func:`identity_swaps`.
@@ -549,8 +553,8 @@ def decide_sides(evidence: list[SideEvidence | None], forced: list[str] | None =
 
 def swap_ranges(swaps: np.ndarray) -> list[list[int]]:
     """The runs ``[start, stop)`` of frames of a bool ``(F,)`` (:func:`identity_swaps`), for reports."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[False], swaps, [False]]).astype(np.int8)))
-    return [[int(a), int(b)] for a, b in zip(edges[::2], edges[1::2])]
+    _, start, stop = mask_runs(np.asarray(swaps, dtype=bool)[:, None])
+    return [[int(a), int(b)] for a, b in zip(start, stop)]
 
 
 def swap_frames(ranges: Sequence[Sequence[int]], frames: int) -> np.ndarray:

@@ -320,13 +320,13 @@ HAND_SCORES_BYTES = 256 * 2 ** 20
 
 
 def _all_hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBatch,
-                     labeler: Labeler) -> np.ndarray:
-    """:func:`_hand_scores` of every frame, re-using the scores of the last take labeled where a
-    hand was offered the same points (the frames where it was not are scored again)."""
+                     labeler: Labeler, known: Sequence[tuple[np.ndarray, np.ndarray]] = ()) -> np.ndarray:
+    """:func:`_hand_scores` of every frame, re-using ``known`` ``(members, scores)`` of this take
+    and those kept of the last take labeled, where a hand was offered the same points (the frames
+    where it was not are scored again)."""
     key = (*_take_key(take), getattr(labeler, "path", id(labeler)), batch.mask.shape, tuple(layout.names))
-    kept = _HAND_SCORES.get(key, [])
     best, changed = None, None
-    for old_members, old_scores in kept:
+    for old_members, old_scores in [*known, *_HAND_SCORES.get(key, [])]:
         rows = np.flatnonzero((old_members != members).any(axis=1))
         if changed is None or len(rows) < len(changed):
             best, changed = old_scores, rows
@@ -418,8 +418,7 @@ def _name_hands(take: Take, layout: Layout, labeling: Labeling, found: Hands, si
         labeling.info["hands"] = facts
         return labeling
     right = _handedness(take, layout, labeling, found.count)
-    evidence = [SideEvidence(left=int((r < 0).sum()), right=int((r > 0).sum())) if r.any() else None
-                for r in right.T]
+    evidence = [SideEvidence.of(r) for r in right.T]
     side_list, side_facts = decide_sides(evidence, None if sides is None else list(sides))
     if swaps is not None and swaps.any():
         facts["swaps"] = swap_ranges(swaps)
@@ -581,7 +580,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if found.count == 2:
         labeler = labeler or make_labeler(method, layout, model)
         every = np.arange(take.n_frames)
-        hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler) for h in range(2)]
+        scored_members = [found.members(h) for h in range(2)]
+        hand_scores = [_all_hand_scores(take_in, layout, scored_members[h], batch, labeler) for h in range(2)]
         joint = scores = _joint_scores(hand_scores, found, batch, every)
     else:
         labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
@@ -670,8 +670,11 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         if offered:
             say("temporal step: both hands again")
             t = time.perf_counter()
-            # A hand whose points did not change keeps its scores.
-            hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler) for h in range(2)]
+            # A hand whose points did not change keeps its scores (those of a long take are not
+            # kept between calls: passed on here).
+            known = list(zip(scored_members, hand_scores))
+            hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler, known)
+                           for h in range(2)]
             joint = joint.copy()
             joint[rows] = _joint_scores(hand_scores, found, batch, rows)
             member = offered_to()
