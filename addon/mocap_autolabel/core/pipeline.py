@@ -323,17 +323,19 @@ def _all_hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: Fra
                      labeler: Labeler, known: Sequence[tuple[np.ndarray, np.ndarray]] = ()) -> np.ndarray:
     """:func:`_hand_scores` of every frame, re-using ``known`` ``(members, scores)`` of this take
     and those kept of the last take labeled, where a hand was offered the same points (the frames
-    where it was not are scored again)."""
+    where it was not are scored again). ``known`` scores not kept are the caller's to give up:
+    one is changed in place (a long take's are hundreds of megabytes)."""
     key = (*_take_key(take), getattr(labeler, "path", id(labeler)), batch.mask.shape, tuple(layout.names))
+    kept = _HAND_SCORES.get(key, [])
     best, changed = None, None
-    for old_members, old_scores in [*known, *_HAND_SCORES.get(key, [])]:
+    for old_members, old_scores in [*known, *kept]:
         rows = np.flatnonzero((old_members != members).any(axis=1))
         if changed is None or len(rows) < len(changed):
             best, changed = old_scores, rows
     if best is None or len(changed) > 0.5 * len(members):
         scores = _hand_scores(take, layout, members, batch, labeler, np.arange(take.n_frames))
     else:
-        scores = best.copy()
+        scores = best.copy() if any(best is s for _, s in kept) else best
         if len(changed):
             scores[changed] = _hand_scores(take, layout, members, batch, labeler, changed)
     if scores.nbytes * 4 <= HAND_SCORES_BYTES:  # both hands, before and after a second look
@@ -672,9 +674,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             t = time.perf_counter()
             # A hand whose points did not change keeps its scores (those of a long take are not
             # kept between calls: passed on here).
-            known = list(zip(scored_members, hand_scores))
-            hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler, known)
-                           for h in range(2)]
+            hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler,
+                                            [(scored_members[h], hand_scores[h])]) for h in range(2)]
             joint = joint.copy()
             joint[rows] = _joint_scores(hand_scores, found, batch, rows)
             member = offered_to()
