@@ -647,25 +647,16 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     labeling = decide(scores, samples=samples)
     times["temporal"] = time.perf_counter() - t
 
-    def traded_places() -> Labeling | None:
+    def traded_places() -> np.ndarray | None:
         """Where the hands touched, the tracker may have carried each hand's identity on with the
-        other: the labeled markers' handedness says where; then the take is labeled again."""
+        other: the labeled markers' handedness says where (bool ``(F,)``; None: nowhere)."""
         if found.count != 2 or swaps is not None:
             return None
         traded = identity_swaps(_handedness(take, layout, labeling, 2), found.centre)
-        if not traded.any():
-            return None
-        say("labeling again: the hands traded places where they touched")
-        again = label_take(**{**args, "hand_swaps": swap_ranges(traded), "labeler": labeler})
-        again.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
-        again.info["seconds"]["traded_places"] = round(sum(times.values()), 4)
-        share(1.0)
-        return again
+        return traded if traded.any() else None
 
-    again = traded_places()  # before more work is spent on this labeling
-    if again is not None:
-        return again
-    if found.count == 2:
+    traded = traded_places()  # before more work is spent on this labeling
+    if found.count == 2 and traded is None:
         # A marker given to the wrong hand is one its labeler rejects: trajectories left null near
         # the other hand are offered to both hands, and both are labeled again.
         offered, rows = _offer_nulls(found, labeling, take_in)
@@ -682,10 +673,17 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             scores = _apply_constraints(joint, slots, mask, constraints)
             labeling = decide(scores, first=labeling, samples=score_samples(scores, batch, rows, samples))
             times["hands_again"] = time.perf_counter() - t
-            again = traded_places()  # the hands' second look labels more of a hand that traded places
-            if again is not None:
-                return again
+            traded = traded_places()  # the hands' second look labels more of a hand that traded places
         info["hands_offered_again"] = offered
+    if traded is not None:
+        # The first labeling's arrays go before the take is labeled again (a long take's are gigabytes).
+        del scores, joint, hand_scores, samples, labeling, batch, points, mask, slots, member, f_idx, k_idx
+        say("labeling again: the hands traded places where they touched")
+        again = label_take(**{**args, "hand_swaps": swap_ranges(traded), "labeler": labeler})
+        again.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
+        again.info["seconds"]["traded_places"] = round(sum(times.values()), 4)
+        share(1.0)
+        return again
     share(decided)
     if validate:
         say("validating with the hand fit")
