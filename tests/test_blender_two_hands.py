@@ -241,3 +241,38 @@ def test_a_held_prop_is_kept_out_of_the_hands_in_blender(empty_scene, bpy_module
     assert not ((per[:, synth.prop_slots] >= 0) & valid[:, synth.prop_slots]).any()
     line = summary(lab, bpy.context.scene.mocap_autolabel.sure)["props"]
     assert line.startswith("1 rigid prop kept out of the hands")
+
+
+def test_hands_that_traded_places_stay_put_back_through_review(empty_scene, bpy_module, tmp_path):
+    """A long take of interacting hands whose tracker swaps them for a stretch: Label Markers puts
+    them back and says where, in scene frames; a correction's re-solve, save and reopen keep it."""
+    from mocap_autolabel.blender.review import first_frame, summary
+
+    bpy = bpy_module
+    scene = bpy.context.scene
+    synth = two_hand_take(load_layout("han19"), 3000, seed=1)
+    coll = import_written(bpy, synth.take, tmp_path, "trade")
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    lab = _state(coll).labeling
+    swaps = lab.info["hands"]["swaps"]
+    assert swaps
+    first = first_frame(coll)
+    (a, b), *_ = swaps
+    line = summary(lab, scene.mocap_autolabel.sure, first)["hands_traded"]
+    assert f"put back in frames {a + first}-{b - 1 + first}" in line
+    per, valid = lab.per_sample(), synth.take.valid
+    ok = valid & (synth.labels >= 0) & (per >= 0)
+    assert ((synth.labels[ok] < M) == (per[ok] < M)).mean() > 0.99  # every sample on its own hand
+    # Lock a marker inside the stretch the hands traded, re-solve, save and reopen, re-solve again.
+    l_tip = lab.names.index("L_IndexTip")
+    index = a + int(np.argmax((per[a:b] == l_tip).any(axis=1)))
+    scene.frame_set(index + first)
+    _select(bpy, _objects(coll)[l_tip])
+    assert bpy.ops.mocap_autolabel.lock() == {"FINISHED"}
+    assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
+    assert _state(coll).labeling.info["hands"]["swaps"] == swaps
+    assert (_state(coll).labeling.per_sample()[valid] == per[valid]).mean() > 0.99
+    coll = save_and_reopen(bpy, tmp_path / "trade.blend")
+    assert len(_state(coll).review.constraints) == 1
+    assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
+    assert _state(coll).labeling.info["hands"]["swaps"] == swaps

@@ -311,8 +311,11 @@ def _hand_options(args) -> dict:
             "naming": HandNaming(args.hand_names) if args.hand_names else None}
 
 
-def _hands_line(labeling, confident: float = 0.95) -> str | None:
-    """One line per take on the hands found and their sides, or None for a plain one-hand take."""
+def _hands_line(labeling, first_frame: int = 0, confident: float = 0.95) -> str | None:
+    """One line per take on the hands found and their sides (frames numbered from ``first_frame``),
+    or None for a plain one-hand take."""
+    from .core.hands import traded_text
+
     facts = labeling.info.get("hands", {})
     count = facts.get("count", 1)
     if count < 2 and "sides" not in facts:
@@ -330,8 +333,7 @@ def _hands_line(labeling, confident: float = 0.95) -> str | None:
     line = (f"{count} hand{'s' if count > 1 else ''}{forced}: " + "; ".join(parts)
             + f" (sides {100 * facts.get('confidence', 0):.0f} % sure)")
     if facts.get("swaps"):  # where the hands touched, the tracker had them the wrong way round
-        line += ("; hands traded places where they touched, put back in frames "
-                 + ", ".join(f"{a}-{b - 1}" for a, b in facts["swaps"]))
+        line += "; " + traded_text(facts["swaps"], first_frame)
     if facts.get("warning"):
         line += f"\n  warning  {facts['warning']}"
     return line
@@ -598,7 +600,7 @@ def _label(args) -> int:
           f"{summary['null_segments']} null; {100 * summary['confident_share']:.1f} % of labeled samples confident, "
           f"{len(summary['uncertain_segments'])} uncertain segments")
     report = {"file": args.file, "info": labeling.info, "summary": summary}
-    hands = _hands_line(labeling)
+    hands = _hands_line(labeling, take.first_frame)
     if hands:
         print(f"  hands    {hands}")
     for prop in labeling.info.get("props", []):

@@ -422,9 +422,11 @@ def object_for(take_coll: bpy.types.Collection, labeling: Labeling, segment: int
     return _null_objects(coll).get(int(labeling.slot[segment])) if coll is not None else None
 
 
-def summary(labeling: Labeling, sure: float) -> dict:
+def summary(labeling: Labeling, sure: float, first: int = 0) -> dict:
     """The panel's figures: labels present, share of labeled samples that are confident, uncertain segments,
-    and the warning when another layout fits the take clearly better (or None)."""
+    and the warning when another layout fits the take clearly better (or None); ``first``: the scene frame
+    of the take's first sample."""
+    from ..core.hands import traded_text
     from ..core.pipeline import LayoutDoubt
 
     s = labeling.summary(sure)
@@ -439,6 +441,7 @@ def summary(labeling: Labeling, sure: float) -> dict:
             "uncertain": len(uncertain_segments(labeling, sure)),
             "locked": int(labeling.locked.sum()), "layout_doubt": doubt and LayoutDoubt(**doubt),
             "hands": hands, "hands_warning": facts.get("warning"),
+            "hands_traded": traded_text(facts.get("swaps", []), first),
             "props": _props_line(labeling.info.get("props", [])),
             # perm and cnn: their calibrated confidence never reaches the bar (see the CLI's note)
             "never_confident": bool(labeling.info.get("never_confident"))}

@@ -557,6 +557,15 @@ def swap_ranges(swaps: np.ndarray) -> list[list[int]]:
     return [[int(a), int(b)] for a, b in zip(start, stop)]
 
 
+def traded_text(ranges: Sequence[Sequence[int]], first_frame: int = 0) -> str | None:
+    """One line on where the hands traded places (:func:`swap_ranges`' runs, frames numbered from
+    ``first_frame``), or None where they did not."""
+    if not ranges:
+        return None
+    return ("hands traded places where they touched, put back in frames "
+            + ", ".join(f"{a + first_frame}-{b - 1 + first_frame}" for a, b in ranges))
+
+
 def swap_frames(ranges: Sequence[Sequence[int]], frames: int) -> np.ndarray:
     """bool ``(F,)`` from :func:`swap_ranges`' runs."""
     out = np.zeros(frames, dtype=bool)

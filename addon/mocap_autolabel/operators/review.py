@@ -260,7 +260,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         return {"CANCELLED"}
 
     def _finish(self, context, request, labeling) -> set[str]:
-        from ..blender.review import finish_label, summary
+        from ..blender.review import finish_label, first_frame, summary
         from ..core.review import plural
 
         coll = bpy.data.collections.get(request.take_name)
@@ -282,7 +282,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
             p = request.picked
             self.report({"INFO"}, f"Layout set to {p['to']}: the take fits it better ({100 * p['better_share']:.0f} % "
                                   f"of labeled samples confident, against {100 * p['share']:.0f} % with {p['from']})")
-        s = summary(labeling, context.scene.mocap_autolabel.sure)
+        s = summary(labeling, context.scene.mocap_autolabel.sure, first_frame(coll))
         if request.dropped:
             self.report({"WARNING"}, self._dropped_message(coll, request))
         kept = len(request.review.constraints) + len(request.review.splits)
@@ -290,6 +290,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
                               f"{s['labels']} labels, {s['confident']:.1f} % of labeled samples confident, "
                               f"{plural(s['uncertain'], 'uncertain segment')}"
                               + (f"; {s['hands']}" if s["hands"] else "")
+                              + (f"; {s['hands_traded']}" if s["hands_traded"] else "")
                               + (f"; {plural(kept, 'correction')} kept" if kept else ""))
         if s["hands_warning"]:
             self.report({"WARNING"}, f"{request.take_name}: {s['hands_warning']}")

@@ -60,7 +60,7 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
     bl_label = "Review"
 
     def draw(self, context):
-        from ..blender.review import has_review, load_state, summary
+        from ..blender.review import first_frame, has_review, load_state, summary
 
         layout = self.layout
         settings = context.scene.mocap_autolabel
@@ -68,11 +68,13 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
             layout.label(text="Label a take to review it", icon="INFO")
             return
         state = load_state(settings.take)
-        s = summary(state.labeling, settings.sure)
+        s = summary(state.labeling, settings.sure, first_frame(settings.take))
         box = layout.box()
         box.label(text=f"{settings.take.name}: {state.layout}, {state.method}, {state.temporal}")
         if s["hands"]:
             box.label(text=s["hands"])
+        if s["hands_traded"]:
+            box.label(text=s["hands_traded"], icon="INFO")
         if s["hands_warning"]:
             box.label(text=s["hands_warning"], icon="ERROR")
         if s["props"]:
