@@ -89,7 +89,7 @@ def test_fill_acts_on_the_selected_markers_and_a_relabel_clears_their_fills(labe
     others = [label for label in gappy[1:]]
     assert all("GENERATED" not in _keys(objs[label])[1] for label in others)
     _select(bpy)
-    assert bpy.ops.mocap_autolabel.fill_gaps(method="auto") == {"FINISHED"}  # no solved hand: rigid, pca, spline
+    assert bpy.ops.mocap_autolabel.fill_gaps(method="auto") == {"FINISHED"}  # no solved hand: pose, spline
     assert all("GENERATED" in _keys(objs[label])[1] for label in gappy)
     # Another Confident at recolours markers: their fills stay.
     counts = {label: _keys(objs[label])[1].count("GENERATED") for label in gappy}

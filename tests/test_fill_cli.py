@@ -77,3 +77,10 @@ def test_label_and_batch_fill(tmp_path, capsys):
     assert rep["fill"]["filled"] >= 1 and rep["fill"]["method"] == "spline"
     back = read_c3d(tmp_path / "batch" / "raw.labeled.c3d")
     np.testing.assert_array_equal(back.filled, filled.filled)
+
+
+def test_the_command_line_offers_every_fill_method():
+    from mocap_autolabel.cli import FILL_METHODS
+    from mocap_autolabel.core.fill import METHODS
+
+    assert FILL_METHODS == METHODS

@@ -55,7 +55,7 @@ class BatchSettings:
         hand_names: how two hands' labels carry their side (see ``label --hand-names``).
         calibration: with two hands, one calibration per side may be given as ``"left.json,right.json"``.
         fill: also fill the labeled markers' gaps in ``<name>.labeled.c3d`` (marked as computed),
-            by ``fill_method`` (``auto``, ``spline``, ``rigid``, ``hand``, ``pca``), gaps up to
+            by ``fill_method`` (``auto``, ``spline``, ``rigid``, ``hand``, ``pca``, ``pose``), gaps up to
             ``max_gap`` seconds; the report's ``fill`` holds every gap.
     """
 

@@ -262,7 +262,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-FILL_METHODS = ("auto", "spline", "rigid", "hand", "pca")
+#: The fill methods (core.fill.METHODS; written out here so that the parser loads no numpy).
+FILL_METHODS = ("auto", "spline", "rigid", "hand", "pca", "pose")
 
 
 def _fill_arguments(parser: argparse.ArgumentParser, flag: str | None = None) -> None:
@@ -272,8 +273,9 @@ def _fill_arguments(parser: argparse.ArgumentParser, flag: str | None = None) ->
                                                             "(marked as computed; see the fill command)")
     parser.add_argument("--fill-method" if flag else "--method", dest="fill_method", default="auto",
                         choices=FILL_METHODS,
-                        help="auto (default: per gap the method with the lowest expected error), spline, rigid, "
-                             "hand (the calibrated, solved hand) or pca")
+                        help="auto (default: per gap the method with the lowest expected error of hand, pose "
+                             "and spline), spline, rigid, hand (the calibrated, solved hand), pca, or pose (read "
+                             "off the other markers in the hand's frame)")
     parser.add_argument("--max-gap", type=float, default=1.0, metavar="SECONDS",
                         help="gaps longer than this are left open (default 1 s)")
 

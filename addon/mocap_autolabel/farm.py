@@ -66,13 +66,20 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
         # MALLOC_TRIM_THRESHOLD_): labeling allocates and frees large numpy temporaries, and paid
         # for that in page faults (the same takes 15 % slower than in batch --jobs). glibc's own
         # default instead (None unsets it); the thread caps as set above. Nor does a worker sample its own stack every
-        # 10 ms for Dask's profiler (a dashboard this cluster does not serve).
+        # 10 ms for Dask's profiler (a dashboard this cluster does not serve). The event-loop tick (20 ms),
+        # system monitor (0.5 s) and memory monitor (0.1 s) wake each worker's loop for the GIL while it
+        # labels, and work stealing moves nothing when each worker holds one take: slowed, and off
+        # (8 takes: Dask's time against batch --jobs 2 from about +11 % to +6 %).
         for attempt in range(TRIES):  # a worker process that dies while the cluster starts fails the start
             try:
                 with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                                       "distributed.worker.profile.enabled": False,
                                       "distributed.worker.multiprocessing-method": "forkserver",
-                                      "distributed.scheduler.worker-saturation": 1.0}):
+                                      "distributed.scheduler.worker-saturation": 1.0,
+                                      "distributed.admin.tick.interval": "1s",
+                                      "distributed.admin.system-monitor.interval": "2s",
+                                      "distributed.worker.memory.monitor-interval": "1s",
+                                      "distributed.scheduler.work-stealing": False}):
                     cluster = LocalCluster(n_workers=int(where), threads_per_worker=1, processes=True,
                                            dashboard_address=None, silence_logs=logging.ERROR, env=env)
                 break

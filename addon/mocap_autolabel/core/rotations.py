@@ -91,3 +91,20 @@ def random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
         np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
         np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
     ], axis=1)
+
+
+
+def kabsch(model: np.ndarray, observed: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted rigid fit of ``model (K, 3)`` onto each frame of ``observed (F, K, 3)`` (weights
+    ``(F, K)``, 0 where a point is unseen, its value then ignored): rotation matrices ``(F, 3, 3)``
+    and translations ``(F, 3)`` with ``observed ~ R model + t`` (Kabsch, numpy's batched SVD)."""
+    w = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-12)
+    obs = np.where(weights[..., None] > 0, observed, 0.0)
+    mc = w @ model  # (F, 3)
+    oc = (w[:, None] @ obs)[:, 0]
+    cov = ((obs - oc[:, None]) * w[..., None]).transpose(0, 2, 1) @ (model[None] - mc[:, None])
+    u, _, vt = np.linalg.svd(cov)
+    d = np.sign(np.linalg.det(u @ vt))
+    u[:, :, 2] *= d[:, None]
+    rot = u @ vt
+    return rot, oc - (rot @ mc[..., None])[..., 0]

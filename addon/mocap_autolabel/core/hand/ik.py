@@ -20,6 +20,7 @@ import numpy as np
 
 from ..rotations import (
     continuous_quaternions,
+    kabsch,
     matrix_to_quaternion,
     matrix_to_rotvec,
     quaternion_to_rotvec,
@@ -239,7 +240,8 @@ class HandSolver:
             canon[6:] = joints
             model = self.markers(canon[None])[0]  # hand frame (global identity)
             poses = np.tile(canon, (n, 1))
-            poses[:, 0:3], poses[:, 3:6] = _kabsch(model, observed, wts)
+            rot, poses[:, 3:6] = kabsch(model, observed, wts)
+            poses[:, 0:3] = matrix_to_rotvec(rot)
             poses, cost = self.refine(poses, observed, self.cold_iterations // 4)
             better = cost < best_cost
             best[better], best_cost[better] = poses[better], cost[better]
@@ -346,19 +348,3 @@ def smooth_poses(poses: np.ndarray, rate: float, cutoff_hz: float = 10.0) -> np.
     return out
 
 
-def _kabsch(model: np.ndarray, observed: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted rigid alignment of ``model (M, 3)`` onto each frame of ``observed (F, M, 3)``.
-
-    Returns rotation vectors ``(F, 3)`` and translations ``(F, 3)`` with ``obs ~ R model + t``.
-    """
-    w = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-12)
-    obs = np.where(weights[..., None] > 0, observed, 0.0)
-    mc = (w[..., None] * model[None]).sum(axis=1)
-    oc = (w[..., None] * obs).sum(axis=1)
-    cov = np.einsum("fm,fmi,fmj->fij", w, obs - oc[:, None], model[None] - mc[:, None])
-    u, _, vt = np.linalg.svd(cov)
-    d = np.sign(np.linalg.det(u @ vt))
-    u[:, :, 2] *= d[:, None]
-    rot = u @ vt
-    t = oc - (rot @ mc[:, :, None])[..., 0]
-    return matrix_to_rotvec(rot), t
