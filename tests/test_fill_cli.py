@@ -84,3 +84,19 @@ def test_the_command_line_offers_every_fill_method():
     from mocap_autolabel.core.fill import METHODS
 
     assert FILL_METHODS == METHODS
+
+
+def test_fill_finds_the_layout_the_file_is_labeled_with(tmp_path, capsys):
+    glove = load_layout("glove13")
+    _, x = marker_motion(glove, HandModel(side="right"), 240, seed=3)
+    x = x.astype(np.float32)
+    x[100:110, 4] = np.nan
+    take = tmp_path / "glove.c3d"
+    write_c3d(Take(x, list(glove.names), 100.0), take)
+    assert main(["fill", str(take), "-o", str(tmp_path / "out.c3d"), "--method", "spline"]) == 0
+    assert "spline fill on glove13" in capsys.readouterr().out
+    raw = tmp_path / "raw.c3d"
+    write_c3d(Take(x, [f"*{i}" for i in range(len(glove))], 100.0), raw)
+    assert main(["fill", str(raw), "-o", str(tmp_path / "out2.c3d")]) == 1
+    err = capsys.readouterr().err
+    assert "is not labeled with a built-in layout" in err and "--layout" in err and "Traceback" not in err

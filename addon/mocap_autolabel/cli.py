@@ -12,6 +12,7 @@ import importlib.util
 import json
 import os
 import sys
+import time
 from dataclasses import asdict
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -182,7 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
                                       "splines; fills are marked as computed in the C3D")
     fil.add_argument("file", metavar="LABELED", help="a labeled take (C3D, TRC or TSV) with the layout's marker names")
     fil.add_argument("-o", "--output", required=True, metavar="FILLED.c3d", help="the filled take")
-    fil.add_argument("--layout", default="han19", help="built-in layout name or a layout .toml (default han19)")
+    fil.add_argument("--layout", help=FOUND_LAYOUT)
     _fill_arguments(fil)
     fil.add_argument("--calibration", metavar="CALIB.json",
                      help="the performer's calibration for the hand fill, one per hand as left.json,right.json "
@@ -195,7 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sol = sub.add_parser("solve", help="fit the rigged hand to a labeled take: calibration, IK, Blender/FBX/BVH")
     sol.add_argument("file", metavar="FILE", help="a labeled take (C3D, TRC or TSV) with the layout's marker names")
-    sol.add_argument("--layout", default="han19", help="built-in layout name or a layout .toml (default han19)")
+    sol.add_argument("--layout", help=FOUND_LAYOUT)
     sol.add_argument("--blend", metavar="OUT.blend", help="write the markers and the animated hand rig")
     sol.add_argument("--fbx", metavar="OUT.fbx", help="export the animated rig as FBX (Blender's exporter)")
     sol.add_argument("--bvh", metavar="OUT.bvh", help="export the animated rig as BVH (Blender's exporter)")
@@ -262,6 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+FOUND_LAYOUT = "built-in layout name or a layout .toml (default: the built-in layout the file's names carry)"
 #: The fill methods (core.fill.METHODS; written out here so that the parser loads no numpy).
 FILL_METHODS = ("auto", "spline", "rigid", "hand", "pca", "pose")
 
@@ -697,7 +699,7 @@ def _solve_progress(bar: _ProgressBar) -> dict:
 def _solve(args) -> int:
     from .core.errors import MocapInputError
     from .core.hand.calibrate import Calibration
-    from .core.hands import HandNaming, sided_path, split_hands
+    from .core.hands import HandNaming, labeled_layout, sided_path, split_hands
     from .core.layout import load_layout
     from .core.pipeline import solve_hands
     from .core.take import read_take
@@ -733,13 +735,14 @@ def _solve(args) -> int:
             return EXIT_FAILED
     bar = _ProgressBar.for_args(args)
     try:
-        layout = load_layout(args.layout)
+        layout = load_layout(args.layout) if args.layout else None
         calibrations = [Calibration.load(p) for p in args.calibration.split(",")] if args.calibration else []
         bar.stage(f"reading {args.file}")
         take = read_take(args.file)
         if reference is not None and reference.stop > take.n_frames:
             raise MocapInputError(args.file, f"has {take.n_frames} frames; --reference-frames ends at {reference.stop}")
         naming = HandNaming(args.hand_names) if args.hand_names else None
+        layout = layout or labeled_layout(take, naming)
         sides = [side for side, _ in split_hands(take, layout, naming)]
         if len(sides) > 1 and args.side:
             raise MocapInputError(args.file, "holds two hands, named by side: --side is for a one-hand take")
@@ -796,16 +799,17 @@ def _fill(args) -> int:
     from .core.fill import fill_gaps
     from .core.formats.c3d import write_c3d
     from .core.hand.calibrate import Calibration
-    from .core.hands import HandNaming, split_hands
+    from .core.hands import HandNaming, labeled_layout, split_hands
     from .core.layout import load_layout
     from .core.take import read_take
 
     bar = _ProgressBar.for_args(args)
     try:
-        layout = load_layout(args.layout)
+        layout = load_layout(args.layout) if args.layout else None
         bar.stage(f"reading {args.file}")
         take = read_take(args.file)
         naming = HandNaming(args.hand_names) if args.hand_names else None
+        layout = layout or labeled_layout(take, naming)
         sides = [side for side, _ in split_hands(take, layout, naming)]
         calibrations = {}
         for path in filter(None, (args.calibration or "").split(",")):
@@ -819,9 +823,13 @@ def _fill(args) -> int:
             from .core.pipeline import solve_hands
 
             bar.stage("calibrating and solving the hand" if len(calibrations) < len(sides) else "solving the hand")
+            t0 = time.perf_counter()
             solves = solve_hands(take, layout, naming, calibrations, **_solve_progress(bar))
+            solve_seconds = time.perf_counter() - t0
         bar.stage("filling gaps")
         result = fill_gaps(take, layout, args.fill_method, args.max_gap, solves=solves, naming=naming)
+        if solves is not None:
+            result.seconds = {"solve": round(solve_seconds, 4)} | result.seconds
         bar.stage(f"writing {args.output}")
         write_c3d(result.take, args.output)
     except Exception as exc:
@@ -829,8 +837,10 @@ def _fill(args) -> int:
         return _fail(args.file, exc)
     bar.close()
     report = result.report()
+    took = report["seconds"]
+    solved = f" (the hand calibrated and solved in {took['solve']:.1f} s)" if "solve" in took else ""
     print(f"{args.file}: {args.fill_method} fill on {layout.name}, max gap {args.max_gap:g} s: {_fill_line(result)} "
-          f"in {report['seconds']['fill']:.2f} s")
+          f"in {took['fill']:.2f} s{solved}")
     reasons: dict[str, int] = {}
     for gap in result.gaps:
         if not gap.filled:

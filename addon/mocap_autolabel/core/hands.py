@@ -661,6 +661,27 @@ def split_hands(take: Take, layout: Layout, naming: HandNaming | None = None) ->
 
 
 
+def labeled_layout(take: Take, naming: HandNaming | None = None) -> Layout:
+    """The built-in layout whose hands a labeled take's names carry (plain names, or each hand's
+    named by side); of several (a han19 file also names every tips5 marker), the one with most
+    markers.
+
+    Raises:
+        MocapInputError: no built-in layout's hand is named in the take.
+    """
+    from .layout import builtin_layouts, load_layout
+
+    best = None
+    for name in builtin_layouts():
+        layout = load_layout(name)
+        if hands_in_names(take.names, layout, naming) and (best is None or len(layout) > len(best)):
+            best = layout
+    if best is None:
+        raise MocapInputError(take.source, f"is not labeled with a built-in layout ({', '.join(builtin_layouts())}): "
+                                           f"no hand's markers are all named (label it first, or give --layout)")
+    return best
+
+
 def sided_path(path: str, side: str) -> str:
     """``take.fbx`` -> ``take_left.fbx``: an output of one hand of a two-hand take (unchanged for
     side ``""``, a one-hand take)."""

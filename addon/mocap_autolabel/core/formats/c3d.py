@@ -499,8 +499,8 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     Missing samples are written as invalid (residual -1), so that every reader sees the gap.
     Names are written in order; unlabeled slots should be named ``*N``. Where ``take.filled`` is
     given, its samples are written as computed the way C3D marks them (residual 0, no camera
-    bits: a 4th word of 0) and the measured ones with the first camera bit, so that no measured
-    sample reads as computed.
+    bits: a 4th word of 0); measured ones carry the first camera bit and their residual (whole
+    file units), so that no measured sample reads as computed (:func:`_fourth_words`).
 
     Args:
         take: positions in metres.
@@ -524,19 +524,41 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     pts[3] = 1.0
     c["data"]["points"] = pts
     valid = take.valid.T
-    residuals = np.where(valid, 0.0, -1.0)
-    if take.residuals is not None:
-        residuals = np.where(valid, np.nan_to_num(take.residuals.T) * scale, -1.0)
-    cameras = np.zeros((7, n_p, n_f), dtype=bool)
-    if take.filled is not None:
-        residuals = np.where(valid & take.filled.T, 0.0, residuals)
-        cameras[0] = valid & ~take.filled.T
-    c["data"]["meta_points"]["residuals"] = residuals[np.newaxis].astype(np.float64)
-    c["data"]["meta_points"]["camera_masks"] = cameras
+    c["data"]["meta_points"]["residuals"] = np.where(valid, 0.0, -1.0)[np.newaxis]
     c["header"]["points"]["first_frame"] = max(int(take.first_frame) - 1, 0)
     with atomic_output(path) as tmp:
         c.write(tmp)
         _check_written(tmp, path, n_f, n_p)
+        _write_fourth_words(tmp, _fourth_words(take, scale))
+
+
+def _fourth_words(take: Take, scale: float) -> np.ndarray:
+    """float32 ``(F, P)``: the 4th word of each sample as the C3D format states it for REAL data: -1
+    where missing; 0 where computed (``take.filled``: residual 0, no camera); else the first camera
+    bit (256; which cameras saw it is not kept) plus the residual in file units (POINT:SCALE -1: whole
+    units, at most 255)."""
+    res = np.zeros(take.valid.shape) if take.residuals is None else np.nan_to_num(take.residuals) * scale
+    words = 256.0 + np.clip(np.round(res), 0, 255)
+    if take.filled is not None:
+        words[take.filled] = 0.0
+    return np.where(take.valid, words, -1.0).astype(np.float32)
+
+
+def _write_fourth_words(path: str, words: np.ndarray) -> None:
+    """Write ``words (F, P)`` as the 4th word of every point sample of the C3D file ``path``.
+
+    ezc3d writes a REAL file's 4th word as two 16-bit integers (camera bits, then residual) in the
+    float's place, which a reader that follows the format (the ``c3d`` package, ours) reads as a
+    1-unit residual with no camera; here it is the float the format defines instead.
+    """
+    with open(path, "r+b") as f:
+        header = np.frombuffer(f.read(20), dtype="<u2")
+        n_p, analog, start = int(header[1]), int(header[2]), int(header[8])
+        frame = 4 * n_p + analog  # 4-byte words per frame
+        data = np.memmap(f, dtype="<f4", mode="r+", offset=(start - 1) * 512, shape=(len(words), frame))
+        data[:, 3:4 * n_p:4] = words
+        data.flush()
+        del data
 
 
 def _check_written(tmp: str, path: str, n_frames: int, n_points: int) -> None:
