@@ -100,3 +100,22 @@ def test_fill_finds_the_layout_the_file_is_labeled_with(tmp_path, capsys):
     assert main(["fill", str(raw), "-o", str(tmp_path / "out2.c3d")]) == 1
     err = capsys.readouterr().err
     assert "is not labeled with a built-in layout" in err and "--layout" in err and "Traceback" not in err
+
+
+def test_label_fill_says_why_gaps_stay_open_and_info_counts_fills(tmp_path, capsys):
+    take = tmp_path / "take.c3d"
+    write_c3d(synthesize(HAN19, 600, seed=1).take, take)
+    out, report = tmp_path / "lab.c3d", tmp_path / "lab.json"
+    assert main(["label", str(take), "-o", str(out), "--fill", "--fill-method", "spline", "--quiet",
+                 "--report", str(report)]) == 0
+    text = capsys.readouterr().out
+    fill = json.loads(report.read_text())["fill"]
+    assert fill["filled"] > 0 and fill["open"] > 0  # the test can tell
+    said = sum(int(line.split()[1]) for line in text.splitlines() if line.startswith("  open     "))
+    assert said == fill["open"]  # each open gap with its reason
+    filled = read_c3d(out).filled.sum()
+    assert filled == fill["filled_samples"]
+    assert main(["info", str(out)]) == 0
+    assert f"filled   {filled} samples marked as computed" in capsys.readouterr().out
+    assert main(["label", str(take), "-o", str(out), "--max-gap", "0.5"]) == 2  # not without --fill
+    assert "are for --fill" in capsys.readouterr().err

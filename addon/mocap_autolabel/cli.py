@@ -290,6 +290,17 @@ def _fill_line(result) -> str:
             f"{report['filled_samples']} samples), {report['open']} left open")
 
 
+def _print_open_gaps(result) -> None:
+    """One line per reason gaps were left open, with how many."""
+    reasons: dict[str, int] = {}
+    for gap in result.gaps:
+        if not gap.filled:
+            key = gap.reason.split(" (")[0]
+            reasons[key] = reasons.get(key, 0) + 1
+    for reason, n in sorted(reasons.items()):
+        print(f"  open     {n} {'gap' if n == 1 else 'gaps'} {reason}")
+
+
 def _hand_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--hands", default="auto", choices=("auto", "1", "2"),
                         help="hands of the layout in the take: found (auto, default) or forced")
@@ -419,6 +430,8 @@ def _info(args) -> int:
               f"({summary['duration_s']:g} s)\n"
               f"  units    {summary['units']}\n"
               f"  missing  {summary['missing_percent']:.2f} %")
+        if summary["filled_samples"]:
+            print(f"  filled   {summary['filled_samples']} samples marked as computed (gap fills)")
         hands = _named_hands(take)
         if hands:
             print(f"  hands    {hands}")
@@ -519,6 +532,10 @@ def _label(args) -> int:
         return EXIT_USAGE
     if args.fill and not args.output:
         print("mocap_autolabel label: error: --fill needs -o OUT.c3d (the filled, labeled take)", file=sys.stderr)
+        return EXIT_USAGE
+    if not args.fill and (args.fill_method != "auto" or args.max_gap != 1.0):
+        print("mocap_autolabel label: error: --fill-method and --max-gap are for --fill (add it to fill the gaps)",
+              file=sys.stderr)
         return EXIT_USAGE
     if args.html:
         from .html_report import MISSING as NO_MATPLOTLIB
@@ -637,6 +654,7 @@ def _label(args) -> int:
     if filled is not None:
         report["fill"] = filled.report()
         print(f"  filled   {_fill_line(filled)}")
+        _print_open_gaps(filled)
     if args.output:
         print(f"  labeled  {args.output}")
     if args.blend:
@@ -841,13 +859,7 @@ def _fill(args) -> int:
     solved = f" (the hand calibrated and solved in {took['solve']:.1f} s)" if "solve" in took else ""
     print(f"{args.file}: {args.fill_method} fill on {layout.name}, max gap {args.max_gap:g} s: {_fill_line(result)} "
           f"in {took['fill']:.2f} s{solved}")
-    reasons: dict[str, int] = {}
-    for gap in result.gaps:
-        if not gap.filled:
-            key = gap.reason.split(" (")[0]
-            reasons[key] = reasons.get(key, 0) + 1
-    for reason, n in sorted(reasons.items()):
-        print(f"  open     {n} {'gap' if n == 1 else 'gaps'} {reason}")
+    _print_open_gaps(result)
     print(f"  filled   {args.output}")
     if args.report:
         try:

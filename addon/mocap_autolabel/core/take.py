@@ -115,6 +115,7 @@ class Take:
             "labeled_points": self.n_points - n_unl,
             "unlabeled_points": n_unl,
             "has_residuals": self.residuals is not None,
+            "filled_samples": 0 if self.filled is None else int(self.filled.sum()),
             "warnings": list(self.warnings),
         }
 
