@@ -303,7 +303,7 @@ def _hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBa
     f_idx, k_idx = np.nonzero(mask)
     column[f_idx, slots[f_idx, k_idx]] = k_idx
     positions = np.where(members[rows][..., None], take.positions[rows], np.nan).astype(np.float32)
-    part = _pack(replace(take, positions=positions, residuals=None), _cap(layout))
+    part = _pack(replace(take, positions=positions, residuals=None, filled=None), _cap(layout))
     scores = labeler.scores(part.points, part.mask)
     pf, pk = np.nonzero(part.mask)
     jk = column[pf, part.slots[pf, pk]]

@@ -1,0 +1,305 @@
+"""Scale: time and peak memory of labeling per stage against the take's length, one and two hands.
+
+    python benchmarks/scale.py [--one 2000,10000,30000,60000,120000,216000] [--two 2000,10000,30000,60000]
+                               [--solve 2000,10000,30000]
+
+Synthetic raw han19 takes (realistic corruption, 120 Hz; two hands: ``core.synth.two_hands``,
+interacting) are written as C3D files first. Each is then labeled in a fresh process, as the
+``label`` command does: the take read, ``label_take`` with its defaults. That process samples its
+own resident memory every 10 ms and charges each peak to the stage ``label_take`` reports at that
+moment (its progress messages); stage seconds are ``label_info["seconds"]``. The one-hand takes
+listed in ``--solve`` are also solved (calibration and IK, ``solve_take``) in their own process.
+The ``label`` CLI end to end (process start, read, label, write) runs on the 10,000-frame one-hand
+take. Writes ``benchmarks/reports/scale.md`` and a log-log plot ``scale.png`` (time and memory
+against frames). Issue 36's goals are checked at the end of the report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "addon"))
+
+REPORTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "reports")
+
+
+def _rss() -> int:
+    """This process's resident memory now, bytes (Linux /proc)."""
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+class StagePeaks:
+    """Samples resident memory every ``every`` seconds; each peak is charged to the current stage."""
+
+    def __init__(self, every: float = 0.01) -> None:
+        self.stage, self.peaks, self.every = "start", {}, every
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.sample()
+            time.sleep(self.every)
+
+    def sample(self) -> None:
+        self.peaks[self.stage] = max(self.peaks.get(self.stage, 0), _rss())
+
+    def __call__(self, message: str, *_share) -> None:
+        self.sample()  # the stage that ends
+        self.stage = re.sub(r"\d[\d,]*", "N", message.split(" (")[0])  # "scoring N frames with set"
+        self.sample()
+
+    def __enter__(self) -> StagePeaks:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.sample()
+
+
+def child_label(path: str) -> dict:
+    """Label the take at ``path`` as the CLI does; seconds and peak memory per stage."""
+    import resource
+
+    from mocap_autolabel.core.layout import load_layout
+    from mocap_autolabel.core.pipeline import label_take
+    from mocap_autolabel.core.take import read_take
+
+    layout = load_layout("han19")
+    start_rss = _rss()
+    t = time.perf_counter()
+    take = read_take(path)
+    read_s = time.perf_counter() - t
+    take_rss = _rss()
+    with StagePeaks() as peaks:
+        t = time.perf_counter()
+        labeling = label_take(take, layout, progress=peaks)
+        total = time.perf_counter() - t
+    return {"frames": take.n_frames, "points": take.n_points, "read_s": read_s, "label_s": total,
+            "seconds": labeling.info["seconds"], "hands": labeling.info.get("hands", {}).get("count", 1),
+            "start_rss": start_rss, "take_rss": take_rss, "stage_peaks": peaks.peaks,
+            "peak_rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
+
+
+def child_solve(path: str) -> dict:
+    """Calibrate and solve the labeled one-hand take at ``path``; seconds and peak memory per stage."""
+    import resource
+
+    from mocap_autolabel.core.layout import load_layout
+    from mocap_autolabel.core.pipeline import solve_take
+    from mocap_autolabel.core.take import read_take
+
+    layout = load_layout("han19")
+    take = read_take(path)
+    take_rss = _rss()
+    with StagePeaks() as peaks:
+        t = time.perf_counter()
+        solved = solve_take(take, layout, progress=peaks)
+        total = time.perf_counter() - t
+    return {"frames": take.n_frames, "solve_s": total, "seconds": solved.seconds, "take_rss": take_rss,
+            "stage_peaks": peaks.peaks, "peak_rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
+
+
+def make_takes(folder: str, one: list[int], two: list[int], solve: list[int]) -> dict:
+    """Write the raw takes (and the labeled truth of the ``solve`` ones) into ``folder``."""
+    import numpy as np
+    from mocap_autolabel.core.formats.c3d import write_c3d
+    from mocap_autolabel.core.layout import load_layout
+    from mocap_autolabel.core.synth.generate import synthesize
+    from mocap_autolabel.core.synth.two_hands import two_hand_take
+    from mocap_autolabel.core.take import Take
+
+    layout = load_layout("han19")
+    paths = {}
+    for frames in sorted(set(one) | set(solve)):
+        synth = synthesize(layout, frames, seed=36)
+        paths["one", frames] = os.path.join(folder, f"one_{frames}.c3d")
+        write_c3d(synth.take, paths["one", frames])
+        if frames in solve:  # the truth as a labeled take: the solve's input
+            lab = synth.labels
+            x = np.full((frames, len(layout), 3), np.nan, dtype=np.float32)
+            f, p = np.nonzero(lab >= 0)
+            x[f, lab[f, p]] = synth.take.positions[f, p]
+            paths["solve", frames] = os.path.join(folder, f"labeled_{frames}.c3d")
+            write_c3d(Take(x, list(layout.names), synth.take.rate), paths["solve", frames])
+        del synth
+        print(f"  wrote the {frames:,}-frame one-hand take", flush=True)
+    for frames in sorted(two):
+        paths["two", frames] = os.path.join(folder, f"two_{frames}.c3d")
+        write_c3d(two_hand_take(layout, frames, seed=36).take, paths["two", frames])
+        print(f"  wrote the {frames:,}-frame two-hand take", flush=True)
+    return paths
+
+
+def run_child(kind: str, path: str) -> dict:
+    out = subprocess.run([sys.executable, os.path.abspath(__file__), "--child", kind, path],
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def cli_seconds(path: str, out_dir: str) -> float:
+    """The ``label`` CLI end to end on ``path`` (best of 3)."""
+    env = dict(os.environ, PYTHONPATH=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "addon"))
+    best = float("inf")
+    for _ in range(3):
+        t = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "mocap_autolabel", "label", path, "--layout", "han19", "--quiet",
+                        "-o", os.path.join(out_dir, "cli_out.c3d")], check=True, capture_output=True, env=env)
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+STAGES = ("hands", "pack", "scores", "temporal", "hands_again", "sides", "props")
+
+
+def gb(b: float) -> str:
+    return f"{b / 2 ** 30:.2f}"
+
+
+def report(rows: dict, solves: list[dict], cli: float | None) -> list[str]:
+    lines = ["# Scale benchmark", "", __doc__.split("\n\n", 2)[1].strip(), "",
+             f"On {os.cpu_count()} cores (this shared machine; other work may have run beside it).", ""]
+    for kind, title in (("one", "One hand"), ("two", "Two hands (interacting)")):
+        mine = sorted((r for (k, _), r in rows.items() if k == kind), key=lambda r: r["frames"])
+        if not mine:
+            continue
+        lines += [f"## {title}", "",
+                  "| frames | label s | frames/s | " + " | ".join(f"{s} s" for s in STAGES) +
+                  " | temporal ms / 1k frames | take read GB | peak GB | peak per frame KB | stage of the peak |",
+                  "|---|---|---|" + "---|" * len(STAGES) + "---|---|---|---|---|"]
+        for r in mine:
+            sec = r["seconds"]
+            temporal = sec.get("temporal", 0) + sec.get("hands_again", 0)
+            peak_stage = max(r["stage_peaks"], key=r["stage_peaks"].get)
+            lines.append(f"| {r['frames']:,} | {r['label_s']:.2f} | {r['frames'] / r['label_s']:,.0f} | " +
+                         " | ".join(f"{sec.get(s, 0):.2f}" for s in STAGES) +
+                         f" | {1000 * temporal / (r['frames'] / 1000):.0f} | {gb(r['take_rss'])} | "
+                         f"{gb(r['peak_rss'])} | {(r['peak_rss'] - r['start_rss']) / r['frames'] / 1024:.1f} | "
+                         f"{peak_stage} |")
+        lines += ["", "Peak resident memory per stage (GB, the whole process):", "",
+                  "| frames | " + " | ".join(sorted({s for r in mine for s in r["stage_peaks"]})) + " |",
+                  "|---|" + "---|" * len({s for r in mine for s in r["stage_peaks"]})]
+        stages = sorted({s for r in mine for s in r["stage_peaks"]})
+        for r in mine:
+            lines.append(f"| {r['frames']:,} | " + " | ".join(
+                gb(r["stage_peaks"][s]) if s in r["stage_peaks"] else "-" for s in stages) + " |")
+        lines.append("")
+    if solves:
+        lines += ["## Hand solve (one hand, labeled by its truth)", "",
+                  "| frames | solve s | frames/s | peak GB | stage of the peak |", "|---|---|---|---|---|"]
+        for r in sorted(solves, key=lambda r: r["frames"]):
+            peak_stage = max(r["stage_peaks"], key=r["stage_peaks"].get)
+            lines.append(f"| {r['frames']:,} | {r['solve_s']:.1f} | {r['frames'] / r['solve_s']:,.0f} | "
+                         f"{gb(r['peak_rss'])} | {peak_stage} |")
+        lines.append("")
+    lines += ["## Issue 36's goals", ""]
+    one = {r["frames"]: r for (k, _), r in rows.items() if k == "one"}
+    two = {r["frames"]: r for (k, _), r in rows.items() if k == "two"}
+
+    def per_frame(r: dict) -> float:
+        sec = r["seconds"]
+        return (sec.get("temporal", 0) + sec.get("hands_again", 0)) / r["frames"]
+
+    if 10_000 in one:
+        r = one[10_000]
+        lines.append(f"- `label_take` on the 10,000-frame one-hand take: {r['frames'] / r['label_s']:,.0f} frames/s "
+                     f"(goal >= 8,000: {'met' if r['frames'] / r['label_s'] >= 8000 else 'NOT met'})")
+    if cli is not None:
+        lines.append(f"- `label` CLI end to end on it: {10_000 / cli:,.0f} frames/s ({cli:.2f} s; goal >= 5,000: "
+                     f"{'met' if 10_000 / cli >= 5000 else 'NOT met'})")
+    longest = max(one) if one else None
+    if longest and 10_000 in one and longest > 10_000:
+        ratio = per_frame(one[longest]) / per_frame(one[10_000])
+        lines.append(f"- temporal time per frame at {longest:,} frames against 10,000: {ratio:.2f}x "
+                     f"(goal <= 1.3x: {'met' if ratio <= 1.3 else 'NOT met'})")
+        lines.append(f"- peak memory, one hand, {longest:,} frames: {gb(one[longest]['peak_rss'])} GB "
+                     f"(goal at 216,000 frames < 3 GB: {_goal(one[longest], 3)})")
+    if two:
+        far = max(two)
+        lines.append(f"- peak memory, two hands, {far:,} frames: {gb(two[far]['peak_rss'])} GB "
+                     f"(goal at 216,000 frames < 4 GB: {_goal(two[far], 4)})")
+    lines.append("")
+    return lines
+
+
+def _goal(row: dict, gigabytes: float) -> str:
+    if row["frames"] < 216_000:
+        return "not run that long"
+    return "met" if row["peak_rss"] < gigabytes * 2 ** 30 else "NOT met"
+
+
+def plot(rows: dict, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for kind, label in (("one", "one hand"), ("two", "two hands")):
+        mine = sorted((r for (k, _), r in rows.items() if k == kind), key=lambda r: r["frames"])
+        if not mine:
+            continue
+        f = [r["frames"] for r in mine]
+        a.plot(f, [r["label_s"] for r in mine], "o-", label=f"{label}: label_take")
+        a.plot(f, [r["seconds"].get("temporal", 0) + r["seconds"].get("hands_again", 0) for r in mine], "s--",
+               label=f"{label}: temporal")
+        a.plot(f, [r["seconds"].get("scores", 0) for r in mine], "^:", label=f"{label}: scores")
+        b.plot(f, [r["peak_rss"] / 2 ** 30 for r in mine], "o-", label=f"{label}: peak")
+        b.plot(f, [r["take_rss"] / 2 ** 30 for r in mine], "s--", label=f"{label}: take read")
+    for ax, what in ((a, "seconds"), (b, "resident memory, GB")):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("frames (120 Hz)")
+        ax.set_ylabel(what)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--one", default="2000,10000,30000,60000,120000,216000")
+    parser.add_argument("--two", default="2000,10000,30000,60000")
+    parser.add_argument("--solve", default="2000,10000,30000")
+    parser.add_argument("--child", nargs=2, metavar=("KIND", "PATH"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        kind, path = args.child
+        print(json.dumps(child_solve(path) if kind == "solve" else child_label(path)))
+        return
+    sizes = {k: [int(v) for v in getattr(args, k).split(",") if v] for k in ("one", "two", "solve")}
+    rows: dict = {}
+    solves = []
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = make_takes(tmp, sizes["one"], sizes["two"], sizes["solve"])
+        for kind in ("one", "two"):
+            for frames in sizes[kind]:
+                rows[kind, frames] = r = run_child(kind, paths[kind, frames])
+                print(f"{kind} hand(s), {frames:,} frames: label {r['label_s']:.2f} s, peak {gb(r['peak_rss'])} GB",
+                      flush=True)
+        for frames in sizes["solve"]:
+            solves.append(run_child("solve", paths["solve", frames]))
+            print(f"solve, {frames:,} frames: {solves[-1]['solve_s']:.1f} s", flush=True)
+        cli = cli_seconds(paths["one", 10_000], tmp) if ("one", 10_000) in paths else None
+    lines = report(rows, solves, cli)
+    from datasets import write_report
+
+    write_report(os.path.join(REPORTS, "scale.md"), lines)
+    plot(rows, os.path.join(REPORTS, "scale.png"))
+
+
+if __name__ == "__main__":
+    main()
