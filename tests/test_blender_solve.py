@@ -128,7 +128,7 @@ def test_solve_errors_are_one_line(tmp_path, capsys, bpy_module):
     write_c3d(raw, tmp_path / "raw.c3d")
     assert main(["solve", str(tmp_path / "raw.c3d")]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "raw.c3d" in err and "not labeled with layout 'han19'" in err
+    assert err.count("\n") == 0 and "raw.c3d" in err and "is not labeled with a built-in layout" in err
     assert main(["solve", str(tmp_path / "raw.c3d"), "--fbx", "x.obj"]) == 2
     (tmp_path / "calib.json").write_text("{}")
     assert main(["solve", str(tmp_path / "raw.c3d"), "--calibration", str(tmp_path / "calib.json")]) == 1
