@@ -37,6 +37,16 @@ def _rss() -> int:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
+def _peak_rss() -> int:
+    """This process's peak resident memory, bytes: VmHWM (getrusage's ru_maxrss of a child spawned
+    by a large parent starts at the parent's peak)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
 class StagePeaks:
     """Samples resident memory every ``every`` seconds; each peak is charged to the current stage."""
 
@@ -70,8 +80,6 @@ class StagePeaks:
 
 def child_label(path: str) -> dict:
     """Label the take at ``path`` as the CLI does; seconds and peak memory per stage."""
-    import resource
-
     from mocap_autolabel.core.layout import load_layout
     from mocap_autolabel.core.pipeline import label_take
     from mocap_autolabel.core.take import read_take
@@ -89,13 +97,11 @@ def child_label(path: str) -> dict:
     return {"frames": take.n_frames, "points": take.n_points, "read_s": read_s, "label_s": total,
             "seconds": labeling.info["seconds"], "hands": labeling.info.get("hands", {}).get("count", 1),
             "start_rss": start_rss, "take_rss": take_rss, "stage_peaks": peaks.peaks,
-            "peak_rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
+            "peak_rss": _peak_rss()}
 
 
 def child_solve(path: str) -> dict:
     """Calibrate and solve the labeled one-hand take at ``path``; seconds and peak memory per stage."""
-    import resource
-
     from mocap_autolabel.core.layout import load_layout
     from mocap_autolabel.core.pipeline import solve_take
     from mocap_autolabel.core.take import read_take
@@ -108,7 +114,7 @@ def child_solve(path: str) -> dict:
         solved = solve_take(take, layout, progress=peaks)
         total = time.perf_counter() - t
     return {"frames": take.n_frames, "solve_s": total, "seconds": solved.seconds, "take_rss": take_rss,
-            "stage_peaks": peaks.peaks, "peak_rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
+            "stage_peaks": peaks.peaks, "peak_rss": _peak_rss()}
 
 
 def make_takes(folder: str, one: list[int], two: list[int], solve: list[int]) -> dict:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from helpers import small_take
 from mocap_autolabel.core.formats.c3d import read_c3d, write_c3d
+from mocap_autolabel.core.take import Take
 
 
 @pytest.fixture
@@ -53,3 +54,27 @@ def test_roundtrip_c3d_package(written):
     assert (data[..., 3][missing] < 0).all() and (data[..., 3][~missing] >= 0).all()
     assert np.abs(data[..., :3][~missing] / 1000.0 - take.positions[~missing]).max() < 1e-5
     assert [n.strip() for n in reader.point_labels] == take.names
+
+
+def test_a_take_longer_than_16_bit_counts_keeps_every_frame(tmp_path):
+    """65,535 frames is all the header and POINT:FRAMES hold (9 minutes at 120 Hz): a longer take
+    states its length in TRIAL:ACTUAL_START/END_FIELD and POINT:LONG_FRAMES, and a file that states
+    only the capped count is read to the end of its data (with a warning), not cut at 65,535."""
+    import ezc3d
+
+    n = 70_001
+    x = np.random.default_rng(3).normal(0, 0.1, (n, 2, 3)).astype(np.float32)
+    x[-1, 1] = np.nan
+    write_c3d(Take(x, ["a", "b"], 120.0, first_frame=7), tmp_path / "long.c3d")
+    back = read_c3d(tmp_path / "long.c3d")
+    assert (back.n_frames, back.first_frame, back.warnings) == (n, 7, [])
+    np.testing.assert_allclose(back.positions, x, atol=1e-7)
+    c = ezc3d.c3d()  # ezc3d alone states 65535 frames for the same data
+    c["parameters"]["POINT"]["RATE"]["value"] = [120.0]
+    c["parameters"]["POINT"]["LABELS"]["value"] = ["a", "b"]
+    pts = np.ones((4, 2, n))
+    pts[:3] = np.transpose(x * 1000, (2, 1, 0))
+    c["data"]["points"] = pts
+    c.write(str(tmp_path / "capped.c3d"))
+    capped = read_c3d(tmp_path / "capped.c3d")
+    assert capped.n_frames == n and "the most its 16-bit counts hold" in " ".join(capped.warnings)

@@ -30,6 +30,9 @@ from ..take import MAX_RATE, Take, mark_missing, to_metres, unit_scale
 
 BLOCK = 512
 MAGIC = 0x50
+#: The most frames the header's and POINT:FRAMES's 16-bit counts hold; a longer take states its
+#: length in TRIAL:ACTUAL_START/END_FIELD (two words each) and POINT:LONG_FRAMES.
+MAX_SHORT_FRAMES = 65535
 #: Frames converted per chunk: bounds the temporary memory of a read.
 CHUNK_FRAMES = 8192
 
@@ -331,10 +334,14 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
         starts = [(2, "the default")]
     # The header's frame fields are 16 bits: a range of 65535 frames or a wrapped one is no count.
     header_frames = int(header.last_frame) - int(header.first_frame) + 1
+    long_frames = max(_trial_frames(reader), int(_number_param(reader, "POINT:LONG_FRAMES") or 0))
     frames = _stated(("the header's first/last frame",
                       header_frames if header_frames > 0 and header.last_frame != 65535 else None),
                      ("POINT:FRAMES", _number_param(reader, "POINT:FRAMES")),
-                     ("TRIAL:ACTUAL_START/END_FIELD", _trial_frames(reader) or None), minimum=0)
+                     ("TRIAL:ACTUAL_START/END_FIELD", _trial_frames(reader) or None),
+                     ("POINT:LONG_FRAMES", _number_param(reader, "POINT:LONG_FRAMES")), minimum=0)
+    if long_frames > MAX_SHORT_FRAMES:  # a long take: the 16-bit counts are only capped, no disagreement
+        frames = [(n, who) for n, who in frames if n > MAX_SHORT_FRAMES] or frames
     analog_words = int(header.analog_count)
 
     best, first = None, None
@@ -352,6 +359,16 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
             if best is None or key < best[0]:
                 best = choice
     (rank, _), n_points, is_real, start, n_frames, available = best
+    capped = ""
+    frame_bytes = (4 * n_points + analog_words) * (4 if is_real else 2)
+    if rank == 2 and n_frames == MAX_SHORT_FRAMES and frame_bytes:
+        # 65535 is all a 16-bit count holds: the data section holds the take's whole length (less
+        # the zero bytes that pad its last block).
+        available = _unpadded_frames(path, (start - 1) * BLOCK, file_size, frame_bytes)
+        capped = (f"the file states {MAX_SHORT_FRAMES} frames, the most its 16-bit counts hold, and no longer "
+                  f"count (TRIAL:ACTUAL_END_FIELD, POINT:LONG_FRAMES); read the {available} frames its data "
+                  f"section holds")
+        n_frames = available
     if rank == 3:
         _, n_points, is_real, start, n_frames, available = first
         raise MocapInputError(
@@ -361,7 +378,7 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
     notes = [_resolved("point count", points, n_points, f"{n_points} points"),
              _resolved("sample format", formats, is_real, "REAL (float)" if is_real else "INT (16-bit)"),
              _resolved("data start", starts, start, f"block {start}"),
-             _resolved("frame count", frames, n_frames, f"{n_frames} frames")]
+             _resolved("frame count", frames, n_frames, f"{n_frames} frames"), capped]
     if not is_real and len(usable) == 2 and not np.isclose(abs(usable[0]), abs(usable[1]), rtol=1e-4):
         notes.append(f"POINT:SCALE ({abs(usable[0]):g}) and the header's scale ({abs(usable[1]):g}) "
                      f"disagree; read with POINT:SCALE")
@@ -369,6 +386,19 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
         raise MocapInputError(path, "no usable scale for its integer samples (POINT:SCALE and the header's are 0)")
     layout = _Layout(processor, is_real, scale, n_points, analog_words, (start - 1) * BLOCK, n_frames)
     return layout, [n for n in notes if n]
+
+
+def _unpadded_frames(path: str, data_start: int, file_size: int, frame_bytes: int) -> int:
+    """Whole frames from ``data_start`` to the end of the file, less the frames at its end that
+    are all zero bytes within its last block (the padding of a data section that ends mid-block)."""
+    n = (file_size - data_start) // frame_bytes
+    with open(path, "rb") as f:
+        while n > 0 and data_start + n * frame_bytes > file_size - BLOCK:
+            f.seek(data_start + (n - 1) * frame_bytes)
+            if any(f.read(frame_bytes)):
+                break
+            n -= 1
+    return n
 
 
 def _fit(space: int, n_frames: int, frame_bytes: int) -> int:
@@ -425,7 +455,10 @@ def _trial_frames(reader) -> int:
     for key in ("TRIAL:ACTUAL_START_FIELD", "TRIAL:ACTUAL_END_FIELD"):
         p = _param(reader, key)
         try:
-            lo, hi = p.uint16_array.ravel()[:2]
+            if p.bytes_per_element == 4:  # the words stored as floats (ezc3d writes integers so)
+                lo, hi = (int(v) & 0xFFFF for v in p.float_array.ravel()[:2])
+            else:
+                lo, hi = p.uint16_array.ravel()[:2]
         except Exception:  # absent, or too short to hold two words
             return 0
         ends.append(int(lo) + 65536 * int(hi))
@@ -517,6 +550,11 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     c["parameters"]["POINT"]["UNITS"]["value"] = [units]
     c["parameters"]["POINT"]["LABELS"]["value"] = [n[:32] for n in take.names]
     c["parameters"]["POINT"]["DESCRIPTIONS"]["value"] = [""] * n_p
+    if n_f > MAX_SHORT_FRAMES:  # beyond the 16-bit counts: the long count as capture systems write it
+        end = int(take.first_frame) + n_f - 1
+        c.add_parameter("POINT", "LONG_FRAMES", [float(n_f)])
+        c.add_parameter("TRIAL", "ACTUAL_START_FIELD", list(_words(int(take.first_frame))))
+        c.add_parameter("TRIAL", "ACTUAL_END_FIELD", list(_words(end)))
     c.add_parameter("MANUFACTURER", "COMPANY", ["mocap_autolabel"])
     c.add_parameter("MANUFACTURER", "SOFTWARE", [f"mocap_autolabel {__version__}"])
     pts = np.zeros((4, n_p, n_f), dtype=np.float64)
@@ -530,6 +568,12 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
         c.write(tmp)
         _check_written(tmp, path, n_f, n_p)
         _write_fourth_words(tmp, _fourth_words(take, scale))
+
+
+def _words(value: int) -> tuple[int, int]:
+    """A 32-bit count as the two signed 16-bit words of a TRIAL field (low, high)."""
+    lo, hi = value & 0xFFFF, (value >> 16) & 0xFFFF
+    return (lo - 65536 if lo > 32767 else lo), (hi - 65536 if hi > 32767 else hi)
 
 
 def _fourth_words(take: Take, scale: float) -> np.ndarray:
