@@ -334,7 +334,9 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
         starts = [(2, "the default")]
     # The header's frame fields are 16 bits: a range of 65535 frames or a wrapped one is no count.
     header_frames = int(header.last_frame) - int(header.first_frame) + 1
-    long_frames = max(_trial_frames(reader), int(_number_param(reader, "POINT:LONG_FRAMES") or 0))
+    stated_long = _number_param(reader, "POINT:LONG_FRAMES")
+    long_frames = max(_trial_frames(reader),
+                      int(stated_long) if stated_long is not None and np.isfinite(stated_long) else 0)
     frames = _stated(("the header's first/last frame",
                       header_frames if header_frames > 0 and header.last_frame != 65535 else None),
                      ("POINT:FRAMES", _number_param(reader, "POINT:FRAMES")),
