@@ -12,7 +12,6 @@ import importlib.util
 import json
 import os
 import sys
-import time
 from dataclasses import asdict
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
@@ -264,6 +263,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 FOUND_LAYOUT = "built-in layout name or a layout .toml (default: the built-in layout the file's names carry)"
+#: Seconds: the default --max-gap (core.fill.MAX_GAP).
+DEFAULT_MAX_GAP = 1.0
 #: The fill methods (core.fill.METHODS; written out here so that the parser loads no numpy).
 FILL_METHODS = ("auto", "spline", "rigid", "hand", "pca", "pose")
 
@@ -278,7 +279,7 @@ def _fill_arguments(parser: argparse.ArgumentParser, flag: str | None = None) ->
                         help="auto (default: per gap the method with the lowest expected error of hand, pose "
                              "and spline), spline, rigid, hand (the calibrated, solved hand), pca, or pose (read "
                              "off the other markers in the hand's frame)")
-    parser.add_argument("--max-gap", type=float, default=1.0, metavar="SECONDS",
+    parser.add_argument("--max-gap", type=float, default=DEFAULT_MAX_GAP, metavar="SECONDS",
                         help="gaps longer than this are left open (default 1 s)")
 
 
@@ -533,7 +534,7 @@ def _label(args) -> int:
     if args.fill and not args.output:
         print("mocap_autolabel label: error: --fill needs -o OUT.c3d (the filled, labeled take)", file=sys.stderr)
         return EXIT_USAGE
-    if not args.fill and (args.fill_method != "auto" or args.max_gap != 1.0):
+    if not args.fill and (args.fill_method != "auto" or args.max_gap != DEFAULT_MAX_GAP):
         print("mocap_autolabel label: error: --fill-method and --max-gap are for --fill (add it to fill the gaps)",
               file=sys.stderr)
         return EXIT_USAGE
@@ -836,18 +837,13 @@ def _fill(args) -> int:
             calibrations["" if sides == [""] else cal.side] = cal
         if len(calibrations) > len(sides):
             raise MocapInputError(args.calibration, f"give one calibration per hand ({len(sides)} in the take)")
-        solves = None
         if args.fill_method in ("auto", "hand"):
-            from .core.pipeline import solve_hands
-
             bar.stage("calibrating and solving the hand" if len(calibrations) < len(sides) else "solving the hand")
-            t0 = time.perf_counter()
-            solves = solve_hands(take, layout, naming, calibrations, **_solve_progress(bar))
-            solve_seconds = time.perf_counter() - t0
-        bar.stage("filling gaps")
-        result = fill_gaps(take, layout, args.fill_method, args.max_gap, solves=solves, naming=naming)
-        if solves is not None:
-            result.seconds = {"solve": round(solve_seconds, 4)} | result.seconds
+        else:
+            bar.stage("filling gaps")
+        # With auto or hand, fill_gaps solves each hand first (its seconds["solve"]).
+        result = fill_gaps(take, layout, args.fill_method, args.max_gap, naming=naming, calibrations=calibrations,
+                           **_solve_progress(bar))
         bar.stage(f"writing {args.output}")
         write_c3d(result.take, args.output)
     except Exception as exc:
@@ -856,7 +852,8 @@ def _fill(args) -> int:
     bar.close()
     report = result.report()
     took = report["seconds"]
-    solved = f" (the hand calibrated and solved in {took['solve']:.1f} s)" if "solve" in took else ""
+    how = "calibrated and solved" if len(calibrations) < len(sides) else "solved"
+    solved = f" (the hand {how} in {took['solve']:.1f} s)" if "solve" in took else ""
     print(f"{args.file}: {args.fill_method} fill on {layout.name}, max gap {args.max_gap:g} s: {_fill_line(result)} "
           f"in {took['fill']:.2f} s{solved}")
     _print_open_gaps(result)

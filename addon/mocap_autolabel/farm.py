@@ -69,7 +69,7 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
         # 10 ms for Dask's profiler (a dashboard this cluster does not serve). The event-loop tick (20 ms),
         # system monitor (0.5 s) and memory monitor (0.1 s) wake each worker's loop for the GIL while it
         # labels, and work stealing moves nothing when each worker holds one take: slowed, and off
-        # (8 takes: Dask's time against batch --jobs 2 from about +11 % to +6 %).
+        # (8 takes: Dask's time against batch --jobs 2 from +11.8 % to +9.1 %, medians of 5 pairs of runs).
         for attempt in range(TRIES):  # a worker process that dies while the cluster starts fails the start
             try:
                 with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,

@@ -47,6 +47,7 @@ from .errors import MocapInputError
 from .layout import Layout
 from .rotations import kabsch
 from .take import Take
+from .tracklets import mask_runs
 
 METHODS = ("auto", "spline", "rigid", "hand", "pca", "pose")
 #: Seconds: longer gaps are left open unless told otherwise.
@@ -577,9 +578,8 @@ def _smooth(track: np.ndarray, window: int) -> np.ndarray:
     from scipy.signal import savgol_filter
 
     out = track.copy()
-    ok = np.isfinite(track[:, 0])
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
-    for a, b in zip(edges[::2], edges[1::2]):
+    _, starts, stops = mask_runs(np.isfinite(track[:, :1]))
+    for a, b in zip(starts, stops):
         if b - a >= window:
             run = median_filter(track[a:b], size=(SPIKE_FRAMES, 1), mode="nearest")
             out[a:b] = savgol_filter(run, window, 2, axis=0, mode="interp")

@@ -334,15 +334,14 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
         starts = [(2, "the default")]
     # The header's frame fields are 16 bits: a range of 65535 frames or a wrapped one is no count.
     header_frames = int(header.last_frame) - int(header.first_frame) + 1
-    stated_long = _number_param(reader, "POINT:LONG_FRAMES")
-    long_frames = max(_trial_frames(reader),
-                      int(stated_long) if stated_long is not None and np.isfinite(stated_long) else 0)
+    trial_frames, long_frames = _trial_frames(reader), _number_param(reader, "POINT:LONG_FRAMES")
     frames = _stated(("the header's first/last frame",
                       header_frames if header_frames > 0 and header.last_frame != 65535 else None),
                      ("POINT:FRAMES", _number_param(reader, "POINT:FRAMES")),
-                     ("TRIAL:ACTUAL_START/END_FIELD", _trial_frames(reader) or None),
-                     ("POINT:LONG_FRAMES", _number_param(reader, "POINT:LONG_FRAMES")), minimum=0)
-    if long_frames > MAX_SHORT_FRAMES:  # a long take: the 16-bit counts are only capped, no disagreement
+                     ("TRIAL:ACTUAL_START/END_FIELD", trial_frames or None),
+                     ("POINT:LONG_FRAMES", long_frames), minimum=0)
+    if max(trial_frames, int(long_frames) if long_frames is not None and np.isfinite(long_frames) else 0) \
+            > MAX_SHORT_FRAMES:  # a long take: the 16-bit counts are only capped, no disagreement
         frames = [(n, who) for n, who in frames if n > MAX_SHORT_FRAMES] or frames
     analog_words = int(header.analog_count)
 
@@ -601,7 +600,7 @@ def _write_fourth_words(path: str, words: np.ndarray) -> None:
         header = np.frombuffer(f.read(20), dtype="<u2")
         n_p, analog, start = int(header[1]), int(header[2]), int(header[8])
         frame = 4 * n_p + analog  # 4-byte words per frame
-        data = np.memmap(f, dtype="<f4", mode="r+", offset=(start - 1) * 512, shape=(len(words), frame))
+        data = np.memmap(f, dtype="<f4", mode="r+", offset=(start - 1) * BLOCK, shape=(len(words), frame))
         data[:, 3:4 * n_p:4] = words
         data.flush()
         del data
