@@ -636,16 +636,42 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
 
     member = offered_to()
 
-    def decide(scores: np.ndarray, first: Labeling | None = None, samples: Samples | None = None) -> Labeling:
+    def decide(scores: np.ndarray, first: Labeling | None = None, samples: Samples | None = None,
+               again: Callable[[Labeling], tuple[Samples, np.ndarray] | None] | None = None) -> Labeling:
         return _decide(scores, batch, take, hand_labels, method, temporal, segments, locked_at, info, score, p, q,
                        split_swaps, n_best, calibrate, null_prior, crossings, switch_cost, partner,
-                       continuity, first, samples, member)
+                       continuity, first, samples, member, again)
+
+    def hands_again(first_vote: Labeling) -> tuple[Samples, np.ndarray] | None:
+        """A marker given to the wrong hand is one its labeler rejects: the trajectories the first
+        vote left null near the other hand are offered to both hands and scored again, before the
+        evidence of partners and continuity is read off that vote and the take is voted on once
+        more (a second look after that vote cost a third vote: 1.3 s of a 10,000-frame take)."""
+        nonlocal hand_scores, joint, scores, member, samples
+        offered, rows = _offer_nulls(found, first_vote, take_in)
+        info["hands_offered_again"] = offered
+        if not offered:
+            return None
+        say("temporal step: both hands again")
+        t = time.perf_counter()
+        # A hand whose points did not change keeps its scores (those of a long take are not kept
+        # between calls: passed on here).
+        hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler,
+                                        [(scored_members[h], hand_scores[h])]) for h in range(2)]
+        joint = joint.copy()
+        joint[rows] = _joint_scores(hand_scores, found, batch, rows)
+        member = offered_to()
+        scores = _apply_constraints(joint, slots, mask, constraints)
+        samples = score_samples(scores, batch, rows, samples)
+        times["hands_again"] = time.perf_counter() - t
+        return samples, member
 
     say(f"temporal step: {temporal}")
     t = time.perf_counter()
     samples = score_samples(scores, batch)
-    labeling = decide(scores, samples=samples)
-    times["temporal"] = time.perf_counter() - t
+    labeling = decide(scores, samples=samples,
+                      again=hands_again if found.count == 2 and temporal == "vote" else None)
+    times["temporal"] = time.perf_counter() - t - times.get("hands_again", 0.0)
 
     def traded_places() -> np.ndarray | None:
         """Where the hands touched, the tracker may have carried each hand's identity on with the
@@ -655,26 +681,11 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         traded = identity_swaps(_handedness(take, layout, labeling, 2), found.centre)
         return traded if traded.any() else None
 
-    traded = traded_places()  # before more work is spent on this labeling
-    if found.count == 2 and traded is None:
-        # A marker given to the wrong hand is one its labeler rejects: trajectories left null near
-        # the other hand are offered to both hands, and both are labeled again.
-        offered, rows = _offer_nulls(found, labeling, take_in)
-        if offered:
-            say("temporal step: both hands again")
-            t = time.perf_counter()
-            # A hand whose points did not change keeps its scores (those of a long take are not
-            # kept between calls: passed on here).
-            hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler,
-                                            [(scored_members[h], hand_scores[h])]) for h in range(2)]
-            joint = joint.copy()
-            joint[rows] = _joint_scores(hand_scores, found, batch, rows)
-            member = offered_to()
-            scores = _apply_constraints(joint, slots, mask, constraints)
-            labeling = decide(scores, first=labeling, samples=score_samples(scores, batch, rows, samples))
-            times["hands_again"] = time.perf_counter() - t
-            traded = traded_places()  # the hands' second look labels more of a hand that traded places
-        info["hands_offered_again"] = offered
+    if found.count == 2 and temporal != "vote":  # no vote to look again after: after the labeling
+        rescored = hands_again(labeling)
+        if rescored is not None:
+            labeling = decide(scores, first=labeling, samples=rescored[0])
+    traded = traded_places()
     if traded is not None:
         # The first labeling's arrays go before the take is labeled again (a long take's are gigabytes).
         del scores, joint, hand_scores, samples, labeling, batch, points, mask, slots, member, f_idx, k_idx
@@ -777,12 +788,15 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
             crossings: dict[int, list[int]], switch_cost: tuple[float, float],
             partner: tuple[float, float] | None, continuity: tuple[float, float],
             first: Labeling | None = None, samples: Samples | None = None,
-            member: np.ndarray | None = None) -> Labeling:
+            member: np.ndarray | None = None,
+            again: Callable[[Labeling], tuple[Samples, np.ndarray] | None] | None = None) -> Labeling:
     """Per-frame scores ``(F, K, M + 1)`` to a Labeling with calibrated confidences. With ``first``
     (an earlier labeling of the take), the evidence of rigid partners and continuity is read off it
     and one vote is held, instead of a first vote to read it off. ``samples``: the scores as
     :func:`score_samples` gives them, where the caller has them already. ``member``: bool
-    ``(n, hands)``, the hands each sample is offered to (two hands; None: one)."""
+    ``(n, hands)``, the hands each sample is offered to (two hands; None: one). ``again``: called
+    with the first vote's labeling (no confidences); where it returns new ``(samples, member)``
+    (the same samples, scored again), the last vote is held on those."""
     points, mask, slots = batch.points, batch.mask, batch.slots
     valid = take.valid
     layout, n_labels = labels.layout, len(labels)
@@ -804,7 +818,15 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
         else:
             decided, label, seg, facts = run_vote(samples)
             per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
-        if with_rigid or with_continuity:
+        rescored = None
+        if again is not None and first is None:
+            rescored = again(Labeling(names=labels.names, n_frames=take.n_frames, n_points=take.n_points,
+                                      slot=decided.slot, start=decided.start, stop=decided.stop,
+                                      label=label.astype(np.int16), confidence=np.zeros(len(decided), np.float32),
+                                      locked=np.zeros(len(decided), dtype=bool), info={}))
+            if rescored is not None:
+                samples, member = rescored
+        if with_rigid or with_continuity or rescored is not None:
             # Vote again with the evidence of rigid partners and of continuity, read off the first
             # vote's labels.
             extra = np.zeros_like(samples.logp)
@@ -827,9 +849,11 @@ def _decide(scores: np.ndarray, batch: FrameBatch, take: Take, labels: _HandLabe
                     extra[:, h * m:(h + 1) * m] += continuity_logp(at, samples.frame, samples.slot, own, held_for,
                                                                    segments, m, take.rate, *continuity,
                                                                    rows=rows[h])[:, :m]
-            if extra.any() or first is not None:
+            if extra.any() or first is not None or rescored is not None:
                 stopped = facts["time_limited"]
-                decided, label, seg, facts = run_vote(replace(samples, logp=samples.logp + extra))
+                # Summed in float64 at once: the vote sums in float64 (one copy fewer of a large array).
+                total = np.add(samples.logp, extra, dtype=np.float64)
+                decided, label, seg, facts = run_vote(replace(samples, logp=total))
                 facts["time_limited"] += stopped
         info.update(facts)
         first_locked = locked_at[decided.start, decided.slot]

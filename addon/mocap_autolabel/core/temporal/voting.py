@@ -474,7 +474,7 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
         seg = segment_of(segments, samples.frame, samples.slot)
     facts = {"swaps_split": int(sum(len(v) for v in swaps.values())), "refined": 0, "time_limited": 0}
     if score == "likelihood":  # summed in float64 in every round: convert once
-        samples = replace(samples, logp=samples.logp.astype(np.float64))
+        samples = replace(samples, logp=samples.logp.astype(np.float64, copy=False))
     while True:
         weights, count = segment_weights(samples, seg, len(segments), score, p, q)
         weights[:, -1] += null_prior[0] * tracklet_share(segments) + null_prior[1] * count
