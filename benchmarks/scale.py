@@ -1,13 +1,17 @@
 """Scale: time and peak memory of labeling per stage against the take's length, one and two hands.
 
-    python benchmarks/scale.py [--one 2000,10000,30000,60000,120000,216000] [--two 2000,10000,30000,60000]
+    python benchmarks/scale.py [--one 2000,10000,30000,60000,120000,216000]
+                               [--two 2000,10000,30000,60000,120000,216000] [--whole 60000]
                                [--solve 2000,10000,30000]
 
 Synthetic raw han19 takes (realistic corruption, 120 Hz; two hands: ``core.synth.two_hands``,
 interacting) are written as C3D files first. Each is then labeled in a fresh process, as the
 ``label`` command does: the take read, ``label_take`` with its defaults. That process samples its
 own resident memory every 10 ms and charges each peak to the stage ``label_take`` reports at that
-moment (its progress messages); stage seconds are ``label_info["seconds"]``. The one-hand takes
+moment (its progress messages); stage seconds are ``label_info["seconds"]``. Takes longer than
+``core.windows.WINDOW_FRAMES`` are labeled in overlapping windows, as ``label_take`` does by
+default; those listed in ``--whole`` are also labeled whole (``window=None``) in a process of
+their own, and the two labelings compared sample by sample and against the truth. The one-hand takes
 listed in ``--solve`` are also solved (calibration and IK, ``solve_take``) in their own process.
 The ``label`` CLI end to end (process start, read, label, write) runs on the 10,000-frame one-hand
 take. Writes ``benchmarks/reports/scale.md`` and a log-log plot ``scale.png`` (time and memory
@@ -78,8 +82,10 @@ class StagePeaks:
         self.sample()
 
 
-def child_label(path: str) -> dict:
-    """Label the take at ``path`` as the CLI does; seconds and peak memory per stage."""
+def child_label(path: str, whole: bool = False) -> dict:
+    """Label the take at ``path`` as the CLI does (``whole``: in one piece, not in windows); seconds
+    and peak memory per stage; the labels of every sample are saved beside the take."""
+    import numpy as np
     from mocap_autolabel.core.layout import load_layout
     from mocap_autolabel.core.pipeline import label_take
     from mocap_autolabel.core.take import read_take
@@ -92,9 +98,11 @@ def child_label(path: str) -> dict:
     take_rss = _rss()
     with StagePeaks() as peaks:
         t = time.perf_counter()
-        labeling = label_take(take, layout, progress=peaks)
+        labeling = label_take(take, layout, progress=peaks, **({"window": None} if whole else {}))
         total = time.perf_counter() - t
-    return {"frames": take.n_frames, "points": take.n_points, "read_s": read_s, "label_s": total,
+    np.save(_labels_path(path, whole), labeling.per_sample())
+    return {"windows": len(labeling.info.get("windows", [])) or 1,
+            "frames": take.n_frames, "points": take.n_points, "read_s": read_s, "label_s": total,
             "seconds": labeling.info["seconds"], "hands": labeling.info.get("hands", {}).get("count", 1),
             "start_rss": start_rss, "take_rss": take_rss, "stage_peaks": peaks.peaks,
             "peak_rss": _peak_rss()}
@@ -117,6 +125,10 @@ def child_solve(path: str) -> dict:
             "stage_peaks": peaks.peaks, "peak_rss": _peak_rss()}
 
 
+def _labels_path(path: str, whole: bool) -> str:
+    return path.replace(".c3d", "_whole.npy" if whole else "_labels.npy")
+
+
 def make_takes(folder: str, one: list[int], two: list[int], solve: list[int]) -> dict:
     """Write the raw takes (and the labeled truth of the ``solve`` ones) into ``folder``."""
     import numpy as np
@@ -132,6 +144,7 @@ def make_takes(folder: str, one: list[int], two: list[int], solve: list[int]) ->
         synth = synthesize(layout, frames, seed=36)
         paths["one", frames] = os.path.join(folder, f"one_{frames}.c3d")
         write_c3d(synth.take, paths["one", frames])
+        np.save(paths["one", frames].replace(".c3d", "_truth.npy"), synth.labels)
         if frames in solve:  # the truth as a labeled take: the solve's input
             lab = synth.labels
             x = np.full((frames, len(layout), 3), np.nan, dtype=np.float32)
@@ -143,12 +156,16 @@ def make_takes(folder: str, one: list[int], two: list[int], solve: list[int]) ->
         print(f"  wrote the {frames:,}-frame one-hand take", flush=True)
     for frames in sorted(two):
         paths["two", frames] = os.path.join(folder, f"two_{frames}.c3d")
-        write_c3d(two_hand_take(layout, frames, seed=36).take, paths["two", frames])
+        two = two_hand_take(layout, frames, seed=36)
+        write_c3d(two.take, paths["two", frames])
+        np.save(paths["two", frames].replace(".c3d", "_truth.npy"), two.labels)
+        del two
         print(f"  wrote the {frames:,}-frame two-hand take", flush=True)
     return paths
 
 
 def run_child(kind: str, path: str) -> dict:
+    """``kind``: ``one`` / ``two`` (labeled as ``label_take`` does), ``whole`` (in one piece) or ``solve``."""
     out = subprocess.run([sys.executable, os.path.abspath(__file__), "--child", kind, path],
                          capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -166,6 +183,23 @@ def cli_seconds(path: str, out_dir: str) -> float:
     return best
 
 
+def compare(path: str, n_labels: int) -> dict:
+    """The take's labels in windows against those of the whole take: samples that differ, and each
+    labeling's instances right against the truth."""
+    import numpy as np
+    from mocap_autolabel.core.metrics import score_labeling
+
+    windows, whole = np.load(_labels_path(path, False)), np.load(_labels_path(path, True))
+    truth = np.load(path.replace(".c3d", "_truth.npy"))
+    valid = whole != -2
+    right = {}
+    for name, labels in (("windows", windows), ("whole", whole)):
+        s = score_labeling(labels, truth, valid, n_labels).as_dict()
+        right[name] = 100 * s["correct"] / max(s["instances"], 1)
+    return {"samples": int(valid.sum()), "differ": int((windows != whole).sum()),
+            "right_windows": right["windows"], "right_whole": right["whole"]}
+
+
 STAGES = ("hands", "pack", "scores", "temporal", "hands_again", "sides", "props")
 
 
@@ -181,14 +215,15 @@ def report(rows: dict, solves: list[dict], cli: float | None) -> list[str]:
         if not mine:
             continue
         lines += [f"## {title}", "",
-                  "| frames | label s | frames/s | " + " | ".join(f"{s} s" for s in STAGES) +
+                  "| frames | windows | label s | frames/s | " + " | ".join(f"{s} s" for s in STAGES) +
                   " | temporal ms / 1k frames | take read GB | peak GB | peak per frame KB | stage of the peak |",
-                  "|---|---|---|" + "---|" * len(STAGES) + "---|---|---|---|---|"]
+                  "|---|---|---|---|" + "---|" * len(STAGES) + "---|---|---|---|---|"]
         for r in mine:
             sec = r["seconds"]
             temporal = sec.get("temporal", 0) + sec.get("hands_again", 0)
             peak_stage = max(r["stage_peaks"], key=r["stage_peaks"].get)
-            lines.append(f"| {r['frames']:,} | {r['label_s']:.2f} | {r['frames'] / r['label_s']:,.0f} | " +
+            lines.append(f"| {r['frames']:,} | {r.get('windows', 1)} | {r['label_s']:.2f} | "
+                         f"{r['frames'] / r['label_s']:,.0f} | " +
                          " | ".join(f"{sec.get(s, 0):.2f}" for s in STAGES) +
                          f" | {1000 * temporal / (r['frames'] / 1000):.0f} | {gb(r['take_rss'])} | "
                          f"{gb(r['peak_rss'])} | {(r['peak_rss'] - r['start_rss']) / r['frames'] / 1024:.1f} | "
@@ -200,6 +235,20 @@ def report(rows: dict, solves: list[dict], cli: float | None) -> list[str]:
         for r in mine:
             lines.append(f"| {r['frames']:,} | " + " | ".join(
                 gb(r["stage_peaks"][s]) if s in r["stage_peaks"] else "-" for s in stages) + " |")
+        lines.append("")
+    compared = sorted(((k, r) for (k, _), r in rows.items() if "compare" in r), key=lambda x: (x[0], x[1]["frames"]))
+    if compared:
+        lines += ["## Windows against the whole take", "",
+                  "The same take labeled whole (`window=None`) in a process of its own.", "",
+                  "| hands | frames | windows | samples | samples labeled differently | instances right %, windows "
+                  "| instances right %, whole | label s, windows / whole | peak GB, windows / whole |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for kind, r in compared:
+            c, w = r["compare"], r["whole"]
+            lines.append(f"| {1 if kind == 'one' else 2} | {r['frames']:,} | {r.get('windows', 1)} | {c['samples']:,} "
+                         f"| {c['differ']:,} ({100 * c['differ'] / max(c['samples'], 1):.3f} %) | "
+                         f"{c['right_windows']:.3f} | {c['right_whole']:.3f} | {r['label_s']:.1f} / {w['label_s']:.1f} "
+                         f"| {gb(r['peak_rss'])} / {gb(w['peak_rss'])} |")
         lines.append("")
     if solves:
         lines += ["## Hand solve (one hand, labeled by its truth)", "",
@@ -278,15 +327,16 @@ def plot(rows: dict, path: str) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--one", default="2000,10000,30000,60000,120000,216000")
-    parser.add_argument("--two", default="2000,10000,30000,60000")
+    parser.add_argument("--two", default="2000,10000,30000,60000,120000,216000")
+    parser.add_argument("--whole", default="60000", help="takes also labeled whole, to compare (both kinds)")
     parser.add_argument("--solve", default="2000,10000,30000")
     parser.add_argument("--child", nargs=2, metavar=("KIND", "PATH"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         kind, path = args.child
-        print(json.dumps(child_solve(path) if kind == "solve" else child_label(path)))
+        print(json.dumps(child_solve(path) if kind == "solve" else child_label(path, whole=kind == "whole")))
         return
-    sizes = {k: [int(v) for v in getattr(args, k).split(",") if v] for k in ("one", "two", "solve")}
+    sizes = {k: [int(v) for v in getattr(args, k).split(",") if v] for k in ("one", "two", "whole", "solve")}
     rows: dict = {}
     solves = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -296,6 +346,11 @@ def main() -> None:
                 rows[kind, frames] = r = run_child(kind, paths[kind, frames])
                 print(f"{kind} hand(s), {frames:,} frames: label {r['label_s']:.2f} s, peak {gb(r['peak_rss'])} GB",
                       flush=True)
+                if frames in sizes["whole"]:
+                    r["whole"] = run_child("whole", paths[kind, frames])
+                    r["compare"] = compare(paths[kind, frames], 19 * (2 if kind == "two" else 1))
+                    print(f"  whole: label {r['whole']['label_s']:.2f} s, peak {gb(r['whole']['peak_rss'])} GB; "
+                          f"{r['compare']}", flush=True)
         for frames in sizes["solve"]:
             solves.append(run_child("solve", paths["solve", frames]))
             print(f"solve, {frames:,} frames: {solves[-1]['solve_s']:.1f} s", flush=True)

@@ -55,6 +55,7 @@ from .temporal.voting import (
     vote,
 )
 from .tracklets import find_crossings, find_tracklets
+from .windows import WINDOW_FRAMES, label_in_windows
 
 #: Temporal modes: ``vote`` (trajectory voting with exclusivity, the default), ``viterbi``
 #: (Alexanderson's N-best + Kalman), ``none`` (per-frame labels as they come).
@@ -452,7 +453,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                done: Callable[[float], None] | None = None, hands: str | int = "auto",
                sides: Sequence[str] | None = None, naming: HandNaming | str | None = None,
                keep_named: bool = True, props: bool = True, exclude: np.ndarray | None = None,
-               hand_swaps: Sequence[Sequence[int]] | None = None) -> Labeling:
+               hand_swaps: Sequence[Sequence[int]] | None = None, window: int | None = WINDOW_FRAMES) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -513,12 +514,15 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             with the other). None: found from a first labeling's handedness
             (:func:`.hands.identity_swaps`), and where there are any the take is labeled again
             with them; ``info["hands"]["swaps"]`` lists them. ``()``: none.
+        window: a take of more frames is labeled in overlapping windows of this many
+            (:mod:`.windows`: memory bounded by a window); None labels it whole. ``nearest``,
+            which starts from the take's first frame, labels it whole.
 
     Returns:
         the :class:`Labeling`; ``info`` holds the settings and the time of each stage, and
         ``info["hands"]`` the hands found (count, sides with their evidence).
     """
-    args = dict(locals())  # to label again without the props found
+    args = dict(locals())  # to label again without the props found, or in windows
     if method not in METHODS:
         raise ValueError(f"unknown labeling method {method!r}; choose one of {', '.join(METHODS)}")
     if temporal not in TEMPORAL:
@@ -532,6 +536,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             raise ValueError(f"constraint {c} lies outside the take ({take.n_frames} frames, {take.n_points} slots)")
     if validate and temporal != "vote":
         raise ValueError("validate needs temporal='vote'")
+    if window is not None and take.n_frames > window and method != "nearest":
+        options = {key: value for key, value in args.items() if key not in ("take", "layout", "window")}
+        return label_in_windows(label_take, take, layout, window, **options)
     say = progress or (lambda _msg: None)
     share = done or (lambda _share: None)
     # Shares of the work at each stage's start: scoring is most of a take's time with the ONNX

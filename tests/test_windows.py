@@ -1,0 +1,95 @@
+"""Long takes labeled in overlapping windows (core/windows.py): bounds, joining, names, constraints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.synth.generate import synthesize
+from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take
+from mocap_autolabel.core.take import Take
+from mocap_autolabel.core.windows import window_bounds
+
+
+@pytest.fixture(scope="module")
+def han19():
+    return load_layout("han19")
+
+
+@pytest.fixture(scope="module")
+def one_hand(han19):
+    return synthesize(han19, 1500, seed=4)
+
+
+@pytest.mark.parametrize("frames,window,overlap", [(100, 100, 10), (101, 100, 10), (1000, 300, 50),
+                                                    (216_000, 30_000, 1_200), (30_001, 30_000, 1_200)])
+def test_window_bounds_cover_the_take_with_overlaps(frames, window, overlap):
+    bounds = window_bounds(frames, window, overlap)
+    assert bounds[0][0] == 0 and bounds[-1][1] == frames
+    for (a, b), (c, d) in zip(bounds[:-1], bounds[1:]):
+        assert b - c >= min(overlap, window // 4) and c > a and d > b  # each overlaps the next, and moves on
+    assert all(b - a <= window for a, b in bounds)
+    if frames <= window:
+        assert bounds == [(0, frames)]
+
+
+def _check_segments(lab, take):
+    """Segments of a slot never overlap, and every valid sample lies in one."""
+    order = np.lexsort((lab.start, lab.slot))
+    assert (order == np.arange(len(lab))).all()
+    same = lab.slot[1:] == lab.slot[:-1]
+    assert (lab.start[1:][same] >= lab.stop[:-1][same]).all()
+    per = lab.per_sample()
+    assert ((per != EMPTY) == take.valid).all()
+
+
+def test_windows_label_a_one_hand_take_as_the_whole_does(han19, one_hand):
+    whole = label_take(one_hand.take, han19, window=None)
+    windows = label_take(one_hand.take, han19, window=500)
+    assert len(windows.info["windows"]) >= 3
+    assert windows.names == whole.names == list(han19.names)
+    _check_segments(windows, one_hand.take)
+    a, b = whole.per_sample(), windows.per_sample()
+    assert (a != b).mean() < 0.002
+    # Stage seconds are summed over the windows, and windows report where they were cut.
+    assert windows.info["seconds"]["scores"] > 0 and windows.info["frames"] == 1500
+    assert all(w["hands"] == 1 for w in windows.info["windows"])
+
+
+def test_a_constraint_across_a_cut_holds_in_every_window(han19, one_hand):
+    take = one_hand.take
+    first = label_take(take, han19, window=500)
+    cut = first.info["windows"][1]["cut"]
+    # The longest trajectory through the first cut, locked to a label it did not get.
+    through = np.flatnonzero((first.start < cut) & (first.stop > cut))
+    seg = through[np.argmax(first.stop[through] - first.start[through])]
+    wrong = (int(first.label[seg]) + 1) % len(han19) if first.label[seg] >= 0 else 0
+    c = Constraint(int(first.slot[seg]), int(first.start[seg]), int(first.stop[seg]), wrong)
+    lab = label_take(take, han19, constraints=[c], window=500)
+    per = lab.per_sample()[c.start:c.stop, c.slot]
+    assert (per[per != EMPTY] == wrong).all()
+    assert lab.locked[(lab.slot == c.slot) & (lab.start < c.stop) & (lab.stop > c.start)].all()
+
+
+def test_two_hands_in_windows_are_named_by_side_throughout(han19):
+    two = two_hand_take(han19, 1500, seed=3, config=TwoHandConfig(close_share=0.0))
+    # The left hand is hidden in the first window: that window holds one hand, the others two.
+    positions = two.take.positions.copy()
+    left = (two.labels >= 0) & (two.labels < len(han19))
+    positions[:600][left[:600]] = np.nan
+    take = Take(positions, list(two.take.names), two.take.rate)
+    truth = np.where(np.isnan(positions[..., 0]), -2, two.labels)
+    lab = label_take(take, han19, window=600)
+    assert [w["hands"] for w in lab.info["windows"]][0] == 1 and lab.info["hands"]["count"] == 2
+    assert lab.names[0] == "L_ThumbCMC" and lab.names[len(han19)] == "R_ThumbCMC"
+    _check_segments(lab, take)
+    per = lab.per_sample()
+    real = truth >= 0
+    assert (per[real] == truth[real]).mean() > 0.99
+    # The right hand of the first window carries its side's labels; no label twice in a frame.
+    assert (per[:600][truth[:600] >= len(han19)] >= len(han19)).mean() > 0.99
+    f, p = np.nonzero(per >= 0)
+    assert len(np.unique(f * 100 + per[f, p])) == len(f)
+    assert NULL not in lab.label[lab.label >= 0]
