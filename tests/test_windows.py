@@ -93,3 +93,20 @@ def test_two_hands_in_windows_are_named_by_side_throughout(han19):
     f, p = np.nonzero(per >= 0)
     assert len(np.unique(f * 100 + per[f, p])) == len(f)
     assert NULL not in lab.label[lab.label >= 0]
+
+
+def test_a_two_hand_re_solve_keeps_each_windows_sides(han19):
+    """A reviewer's re-solve hands each window its own hands' sides back (relabel_options)."""
+    from mocap_autolabel.core.hands import relabel_options
+
+    two = two_hand_take(han19, 1500, seed=5, config=TwoHandConfig(close_share=0.0))
+    lab = label_take(two.take, han19, window=600)
+    options = relabel_options(lab.info)
+    assert options["hands"] == 2 and len(options["sides"]) == len(lab.info["windows"])
+    seg = int(np.argmax(lab.length * (lab.label >= 0)))
+    c = Constraint(int(lab.slot[seg]), int(lab.start[seg]), int(lab.stop[seg]), int(lab.label[seg]))
+    again = label_take(two.take, han19, constraints=[c], window=600, **options)
+    assert again.names == lab.names
+    a, b = lab.per_sample(), again.per_sample()
+    assert (a != b).mean() < 0.002
+    assert again.locked[(again.slot == c.slot) & (again.start < c.stop) & (again.stop > c.start)].all()

@@ -75,7 +75,7 @@ def _window_take(take: Take, start: int, stop: int) -> Take:
 
 def label_in_windows(label: Callable[..., Labeling], take: Take, layout: Layout, window: int = WINDOW_FRAMES,
                      overlap: int = OVERLAP_FRAMES, constraints=(), splits=(), exclude: np.ndarray | None = None,
-                     hand_swaps=None, naming=None, progress: Callable[[str], None] | None = None,
+                     hand_swaps=None, naming=None, sides=None, progress: Callable[[str], None] | None = None,
                      done: Callable[[float], None] | None = None, **options) -> Labeling:
     """Label ``take`` window by window with ``label`` (:func:`.pipeline.label_take`, given the
     other ``options``) and join the windows' labelings.
@@ -83,6 +83,8 @@ def label_in_windows(label: Callable[..., Labeling], take: Take, layout: Layout,
     Constraints, a reviewer's splits, excluded samples and the hands' swaps are handed to the
     windows they fall in. Where some window holds two hands, every window is named by side (a
     window in which one hand is seen names it by its side), and the labels are those of two hands.
+    ``sides``: the sides of the hands in each window's order (a list per window, as the joined
+    ``info["hands"]["by_hand_order"]`` gives them), or one list for every window.
 
     Returns:
         one :class:`.labeling.Labeling` of the whole take; ``info`` is the first window's, with
@@ -101,11 +103,13 @@ def label_in_windows(label: Callable[..., Labeling], take: Take, layout: Layout,
         swaps = None if hand_swaps is None else [[max(a, start) - start, min(b, stop) - start]
                                                   for a, b in hand_swaps if max(a, start) < min(b, stop)]
         inner_done = None if done is None else (lambda share, i=i: done((i + share) / len(bounds)))
+        per_window = sides is not None and len(sides) > 0 and not isinstance(sides[0], str)
         return label(_window_take(take, start, stop), layout,
                      constraints=_window_constraints(constraints, start, stop),
                      splits=[(s, f - start) for s, f in splits if start <= f < stop],
                      exclude=None if exclude is None else exclude[start:stop], hand_swaps=swaps,
-                     naming=naming, progress=progress, done=inner_done, window=None, **options)
+                     naming=naming, sides=sides[i] if per_window else sides, progress=progress, done=inner_done,
+                     window=None, **options)
 
     parts: list[Labeling] = []
     for i in range(len(bounds)):
@@ -167,6 +171,8 @@ def _join(take: Take, parts: list[Labeling], bounds, cuts: list[int], names: lis
     info["time_limited"] = sum(p.info.get("time_limited", 0) for p in parts)
     hands = dict(info.get("hands", {}))
     hands["count"] = max(p.info.get("hands", {}).get("count", 1) for p in parts)
+    if len(parts) > 1:  # each window's hands in its own order: a re-solve hands them back
+        hands["by_hand_order"] = [p.info.get("hands", {}).get("by_hand_order") for p in parts]
     swaps = [[a + s, b + s] for p, (s, _) in zip(parts, bounds) for a, b in p.info.get("hands", {}).get("swaps", [])]
     if swaps:
         hands["swaps"] = swaps
