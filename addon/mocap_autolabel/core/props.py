@@ -142,7 +142,8 @@ def rigid_groups(positions: np.ndarray, tracklets: Tracklets, rate: float,
     return groups
 
 
-def find_props(positions: np.ndarray, tracklets: Tracklets, rate: float, tracklet_label: np.ndarray) -> list[Prop]:
+def find_props(positions: np.ndarray, tracklets: Tracklets, rate: float, tracklet_label: np.ndarray,
+               groups: list[np.ndarray] | None = None) -> list[Prop]:
     """The rigid groups that are not part of a hand, judged by the labels their members took.
 
     Args:
@@ -150,9 +151,11 @@ def find_props(positions: np.ndarray, tracklets: Tracklets, rate: float, trackle
         tracklets: the take's trajectories.
         rate: frames per second.
         tracklet_label: int ``(T,)``: the label each tracklet mostly took (negative: null).
+        groups: the take's :func:`rigid_groups`, where the caller has them (they depend on the take
+            alone).
     """
     out = []
-    for group in rigid_groups(positions, tracklets, rate):
+    for group in rigid_groups(positions, tracklets, rate) if groups is None else groups:
         if (tracklet_label[group] < 0).mean() <= MAX_NULL_SHARE:
             continue  # a hand's markers (held still for a while): the labeler took them
         group = np.concatenate([group, _shorter_members(positions, tracklets, rate, group)])
