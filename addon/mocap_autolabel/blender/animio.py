@@ -93,24 +93,42 @@ def write_keys(fcurve, frames: np.ndarray, values: np.ndarray, interpolation: np
         values: float ``(n,)``.
         interpolation: one name for all keys, or int ``(n,)`` enum values (``interpolation_value``).
     """
-    n = int(frames.shape[0])
+    co = np.empty((int(frames.shape[0]), 2), dtype=np.float32)
+    co[:, 0] = frames
+    co[:, 1] = values
+    write_points(fcurve, co, interpolation)
+
+
+def write_points(fcurve, co: np.ndarray, interpolation: np.ndarray | str = "LINEAR") -> None:
+    """:func:`write_keys` from the keys' (frame, value) pairs: float32 ``(n, 2)``, C-contiguous.
+
+    Where the time goes (bpy 5.0.1, per million keys): ``co`` about 30 ms (Blender sets it key by
+    key through its RNA setter; float32 is the cheapest buffer), ``keyframe_points.add`` about 5 ms
+    (more where the memory is new to the process), the interpolation 3 ms from a uint8 buffer
+    (30 ms from int32: enum properties take Blender's fast copy path only from uint8).
+    """
+    n = int(co.shape[0])
     points = fcurve.keyframe_points
     if len(points):
         points.clear()
     if n == 0:
         return
     points.add(n)
-    co = np.empty(2 * n, dtype=np.float32)
-    co[0::2] = frames
-    co[1::2] = values
-    points.foreach_set("co", co)
+    points.foreach_set("co", np.ascontiguousarray(co, dtype=np.float32).reshape(-1))
     if isinstance(interpolation, str):
-        interp = np.full(n, _INTERPOLATION[interpolation], dtype=np.int32)
+        interp = np.full(n, _INTERPOLATION[interpolation], dtype=np.uint8)
     else:
-        interp = np.asarray(interpolation, dtype=np.int32)
+        interp = np.asarray(interpolation, dtype=np.uint8)
     points.foreach_set("interpolation", interp)
     if (interp == _INTERPOLATION["BEZIER"]).any():
         fcurve.update()
+
+
+def write_key_types(fcurve, types: np.ndarray | int) -> None:
+    """Set the keyframe type of every key of ``fcurve`` in bulk (one enum value for all, or one a key)."""
+    n = len(fcurve.keyframe_points)
+    buf = np.full(n, types, dtype=np.uint8) if np.ndim(types) == 0 else np.asarray(types, dtype=np.uint8)
+    fcurve.keyframe_points.foreach_set("type", buf)
 
 
 def interpolation_value(name: str) -> int:
@@ -129,6 +147,6 @@ def read_keys(fcurve) -> tuple[np.ndarray, np.ndarray]:
 def read_key_types(fcurve) -> np.ndarray:
     """int ``(n,)``: the keyframe type enum value of every key, read in bulk."""
     n = len(fcurve.keyframe_points)
-    types = np.empty(n, dtype=np.int32)
+    types = np.empty(n, dtype=np.uint8)
     fcurve.keyframe_points.foreach_get("type", types)
-    return types
+    return types.astype(np.int32)

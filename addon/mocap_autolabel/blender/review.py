@@ -4,6 +4,8 @@ The take collection made by the importer (``scene.build_take``) holds the whole 
 
 - its raw empties (moved into a hidden "Raw" child collection at the first labeling): the
   take is read back from them, so a saved .blend is a complete review without the source file;
+  or, for a take imported as a point cloud, the one raw point-cloud object (``pointcloud.py``),
+  moved the same way, from whose attributes the take is read back;
 - a "Labeled" child collection: one empty per layout marker, keyed where the label has a sample,
   with keyframe types by confidence class and channel groups coloured by finger;
 - an "Unlabeled" child collection: one empty per point slot that has unassigned samples;
@@ -41,6 +43,7 @@ from ..core.review import (
 )
 from ..core.take import Take
 from . import animio
+from .pointcloud import CLOUD, is_cloud, read_cloud
 from .scene import free_name, key_track, new_marker
 
 #: Channel-group colour set of each digit (Blender's bone colour sets: red, orange, green,
@@ -90,12 +93,21 @@ def _child(take_coll: bpy.types.Collection, key: str, name: str) -> bpy.types.Co
     return coll
 
 
-def raw_markers(take_coll: bpy.types.Collection) -> list[bpy.types.Object]:
-    """The imported (raw) empties of the take, by slot."""
+def _raw_objects(take_coll: bpy.types.Collection) -> list[bpy.types.Object]:
     raw = take_coll.get("mocap_raw")
-    objs = list(take_coll.objects) + (list(raw.objects) if raw is not None else [])
-    return sorted((o for o in objs if "mocap_slot" in o and "mocap_label" not in o and "mocap_null" not in o),
+    return list(take_coll.objects) + (list(raw.objects) if raw is not None else [])
+
+
+def raw_markers(take_coll: bpy.types.Collection) -> list[bpy.types.Object]:
+    """The imported (raw) empties of the take, by slot (none for a take imported as a point cloud)."""
+    return sorted((o for o in _raw_objects(take_coll)
+                   if "mocap_slot" in o and "mocap_label" not in o and "mocap_null" not in o),
                   key=lambda o: o["mocap_slot"])
+
+
+def raw_cloud(take_coll: bpy.types.Collection) -> bpy.types.Object | None:
+    """The take's raw point cloud (:mod:`.pointcloud`), where it was imported as one, else None."""
+    return next((o for o in _raw_objects(take_coll) if is_cloud(o)), None)
 
 
 def first_frame(take_coll: bpy.types.Collection) -> int:
@@ -104,13 +116,20 @@ def first_frame(take_coll: bpy.types.Collection) -> int:
 
 
 def read_take(take_coll: bpy.types.Collection) -> Take:
-    """The take as the scene holds it, read back from the raw empties' keys (metres).
+    """The take as the scene holds it, read back from the raw empties' keys (metres), or from the
+    raw point cloud's attributes for a take imported as one.
 
     Slot numbers are the importer's, so labels and constraints keep meaning the same samples.
     """
-    objs = raw_markers(take_coll)
     scale = float(take_coll.get("mocap_scale", 1.0))
     first = first_frame(take_coll)
+    cloud = raw_cloud(take_coll)
+    if cloud is not None:
+        positions, names = read_cloud(cloud, scale)
+        return Take(positions=positions, names=names, rate=float(take_coll.get("mocap_rate", 100.0)),
+                    first_frame=first, source=take_coll.get("mocap_source", ""),
+                    source_units=str(take_coll.get("mocap_units", "mm")))
+    objs = raw_markers(take_coll)
     keyed = []
     last = -1
     for obj in objs:
@@ -242,9 +261,10 @@ def _hide_raw(take_coll: bpy.types.Collection) -> None:
     if made:
         hide_in_view_layers(raw)
     for obj in list(take_coll.objects):
-        if "mocap_slot" in obj:
+        if "mocap_slot" in obj or is_cloud(obj):
             raw.objects.link(obj)
             take_coll.objects.unlink(obj)
+        if "mocap_slot" in obj:
             obj.name = free_name(obj.get("mocap_point", obj.name) + RAW_SUFFIX, bpy.data.objects, take_coll.name,
                                  current=obj)
 
@@ -518,9 +538,11 @@ def current_take(take_coll: bpy.types.Collection) -> Take:
     from .session import session
 
     cache = session(take_coll)
-    objs = raw_markers(take_coll)
+    cloud = raw_cloud(take_coll)
+    objs = raw_markers(take_coll) if cloud is None else [cloud]
     key = (len(objs), first_frame(take_coll), float(take_coll.get("mocap_scale", 1.0)),
-           sum(len(animio.fcurves_of(o)) for o in objs))
+           sum(len(animio.fcurves_of(o)) for o in objs) if cloud is None
+           else (cloud.name, len(cloud.data.vertices), int(cloud[CLOUD])))
     if cache.take is None or cache.take_key != key:
         if not objs:
             from ..core.errors import MocapInputError

@@ -143,8 +143,11 @@ def mark_missing(positions: np.ndarray, residuals: np.ndarray | None = None) -> 
         positions: float ``(frames, points, 3)``, modified in place.
         residuals: float ``(frames, points)`` or None; negative means missing.
     """
-    missing = np.isnan(positions).any(axis=2)
-    missing |= ~positions.any(axis=2)  # exact (0, 0, 0)
+    x, y, z = positions[..., 0], positions[..., 1], positions[..., 2]
+    # Axis by axis: ``.any(axis=2)`` over a length-3 axis is several times slower (numpy reduces
+    # such short rows one by one), a third of reading a 65,535 x 50 C3D.
+    missing = np.isnan(x) | np.isnan(y) | np.isnan(z)
+    missing |= (x == 0) & (y == 0) & (z == 0)  # exact (0, 0, 0)
     if residuals is not None:
         missing |= residuals < 0
     positions[missing] = np.nan
@@ -173,7 +176,8 @@ def to_metres(positions: np.ndarray, scale: float, residuals: np.ndarray | None 
         positions *= scale
         if residuals is not None:
             residuals *= scale
-        damaged = (np.abs(positions) > DAMAGED_DISTANCE_M).any(axis=2)  # inf too; NaN compares False
+        far = np.abs(positions) > DAMAGED_DISTANCE_M  # inf too; NaN compares False
+        damaged = far[..., 0] | far[..., 1] | far[..., 2]
     count = int(damaged.sum())
     if not count:
         return ""

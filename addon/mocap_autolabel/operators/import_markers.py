@@ -1,4 +1,4 @@
-"""File > Import > C3D markers: a take file becomes a collection of animated empties."""
+"""File > Import > C3D markers: a take file becomes a collection of animated empties (or one point cloud)."""
 
 from __future__ import annotations
 
@@ -29,6 +29,13 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
                                 description="Import only points whose name matches this pattern "
                                             "(* and ? wildcards, case-insensitive)")
     set_scene: BoolProperty(name="Set Scene Frame Rate and Range", default=True)
+    as_point_cloud: BoolProperty(
+        name="As Point Cloud",
+        description="Show the raw markers as one point cloud driven by geometry nodes instead of one keyed "
+                    "empty per marker: no keys, about a tenth of the time and memory, for very long takes. "
+                    "Missing samples are not shown; labeling and review work the same, and labeled markers "
+                    "are keyed empties either way",
+        default=False)
 
     def paths(self) -> list[str]:
         if self.files and self.directory:
@@ -46,7 +53,8 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
         from ..core.errors import MocapInputError
         from ..core.take import read_take
 
-        options = ImportOptions(self.scale, self.frame_offset, self.name_filter, self.set_scene)
+        options = ImportOptions(self.scale, self.frame_offset, self.name_filter, self.set_scene,
+                                as_point_cloud=self.as_point_cloud)
         paths = self.paths()
         if not paths:
             self.report({"ERROR"}, "No file given")
@@ -55,7 +63,7 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
         for path in paths:
             try:
                 take = read_take(path)
-                check_importable(take, options, os.path.basename(path))  # before anything is created
+                markers = len(check_importable(take, options, os.path.basename(path)))  # before anything is made
             except MocapInputError as exc:
                 self.report({"ERROR"}, str(exc))
                 continue
@@ -68,12 +76,33 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
             picked = _pick_layout(context, collection, take)
             for warning in take.warnings:
                 self.report({"WARNING"}, f"{os.path.basename(path)}: {warning}")
-            self.report({"INFO"}, f"Imported {len(collection.objects)} markers x {take.n_frames} frames "
+            self.report({"INFO"}, f"Imported {markers} markers x {take.n_frames} frames "
                                   f"from {os.path.basename(path)}"
+                                  + (" as a point cloud" if options.as_point_cloud else "")
                                   + (f"; Layout set to {picked}: the file names every {picked} marker"
-                                     if picked else ""))
+                                     if picked else "")
+                                  + _suggestion(options, take.n_frames * markers))
             imported += 1
         return {"FINISHED"} if imported else {"CANCELLED"}
+
+
+#: Above this many samples (frames x markers) the import suggests As Point Cloud: a 30-minute take of
+#: two hands (38 markers) at 120 Hz is 8.2 million samples.
+SUGGEST_POINT_CLOUD = 5_000_000
+#: Peak memory growth of an import in Blender, bytes per sample, as benchmarks/import_speed.py measures
+#: it (bpy 5.0.1): keyed, 3 keys of 72 bytes, Blender's evaluated copy of them and the undo step it
+#: pushes after the import (about 640); as a point cloud, the mesh and the take read (about 45).
+KEYED_BYTES_PER_SAMPLE = 640
+CLOUD_BYTES_PER_SAMPLE = 45
+
+
+def _suggestion(options, samples: int) -> str:
+    """A hint to import a very long take as a point cloud (empty when it is one, or short)."""
+    if options.as_point_cloud or samples < SUGGEST_POINT_CLOUD:
+        return ""
+    return (f"; {samples / 1e6:.1f} M samples take about {samples * KEYED_BYTES_PER_SAMPLE / 2**30:.1f} GB "
+            f"of memory as keys: As Point Cloud imports them in about "
+            f"{samples * CLOUD_BYTES_PER_SAMPLE / 2**20:.0f} MB")
 
 
 def _pick_layout(context, collection, take) -> str | None:
@@ -88,7 +117,8 @@ def _pick_layout(context, collection, take) -> str | None:
     settings = context.scene.mocap_autolabel
     if LAYOUT_CHOICE in collection:
         return None
-    picked = layout_for_names(take.names)
+    # A file of unnamed points (*N, M001...) names no layout's markers: skip reading every layout file.
+    picked = None if take.unlabeled.all() else layout_for_names(take.names)
     if picked is None:
         if not settings.layout_file:
             # Not another take's pick: the layout the user chose last (han19 where they chose none).
