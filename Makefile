@@ -89,4 +89,5 @@ test-bpy42:
 	$(PYTHON) -m venv .venv42
 	.venv42/bin/python -m pip install -q "bpy==4.2.0" "numpy==1.26.4" ezc3d c3d onnxruntime scipy pytest
 	.venv42/bin/python -m pytest -q tests/test_blender_import.py tests/test_cli.py tests/test_blender_hand.py \
-		tests/test_blender_solve.py tests/test_blender_review.py tests/test_blender_scene33.py
+		tests/test_blender_solve.py tests/test_blender_review.py tests/test_blender_scene33.py \
+		tests/test_blender_pointcloud.py

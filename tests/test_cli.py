@@ -57,6 +57,21 @@ def test_import_writes_blend_and_summary(tmp_path, bpy_module):
     bpy_module.ops.wm.read_homefile(use_empty=True)
 
 
+def test_import_as_point_cloud_writes_one_object(tmp_path, bpy_module, capsys):
+    src = tmp_path / "take.c3d"
+    write_c3d(small_take(frames=120, points=5), src)
+    blend, summary = tmp_path / "take.blend", tmp_path / "summary.json"
+    assert main(["import", str(src), "--blend", str(blend), "--point-cloud", "--names", "*", "--summary",
+                 str(summary)]) == 0
+    info = json.loads(summary.read_text())
+    assert info["empties"] == 0 and info["point_cloud"]["markers"] == 5
+    assert "5 point-cloud markers x 120 frames" in capsys.readouterr().out
+    bpy_module.ops.wm.open_mainfile(filepath=str(blend))
+    objs = bpy_module.data.collections["take"].objects
+    assert len(objs) == 1 and objs[0].type == "MESH" and len(objs[0].data.vertices) == 120 * 5
+    bpy_module.ops.wm.read_homefile(use_empty=True)
+
+
 def test_import_failure_writes_nothing(tmp_path, capsys):
     bad = tmp_path / "bad.c3d"
     bad.write_bytes(b"\x02\x50" + b"\x00" * 600)
