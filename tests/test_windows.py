@@ -83,6 +83,7 @@ def test_two_hands_in_windows_are_named_by_side_throughout(han19):
     truth = np.where(np.isnan(positions[..., 0]), -2, two.labels)
     lab = label_take(take, han19, window=600)
     assert [w["hands"] for w in lab.info["windows"]][0] == 1 and lab.info["hands"]["count"] == 2
+    assert lab.info["hands"]["sides"] == ["left", "right"] and lab.info["hands"]["naming"]
     assert lab.names[0] == "L_ThumbCMC" and lab.names[len(han19)] == "R_ThumbCMC"
     _check_segments(lab, take)
     per = lab.per_sample()
@@ -110,3 +111,34 @@ def test_a_two_hand_re_solve_keeps_each_windows_sides(han19):
     a, b = lab.per_sample(), again.per_sample()
     assert (a != b).mean() < 0.002
     assert again.locked[(again.slot == c.slot) & (again.start < c.stop) & (again.stop > c.start)].all()
+
+
+def test_the_label_command_labels_a_long_take_in_windows(han19, tmp_path):
+    """A take longer than a window through the label command: one labeled C3D, windows reported."""
+    import json
+
+    from mocap_autolabel.cli import main
+    from mocap_autolabel.core.formats.c3d import write_c3d
+    from mocap_autolabel.core.take import read_take
+    from mocap_autolabel.core.windows import WINDOW_FRAMES
+
+    synth = synthesize(han19, WINDOW_FRAMES + 1500, seed=9)
+    src, out, report = tmp_path / "long.c3d", tmp_path / "long_labeled.c3d", tmp_path / "report.json"
+    write_c3d(synth.take, src)
+    assert main(["label", str(src), "--layout", "han19", "-o", str(out), "--report", str(report), "--quiet"]) == 0
+    info = json.loads(report.read_text())["info"]
+    assert len(info["windows"]) == 2 and info["frames"] == WINDOW_FRAMES + 1500
+    labeled = read_take(str(out))
+    assert labeled.n_frames == WINDOW_FRAMES + 1500
+    named = [n for n in labeled.names if n in han19.names]
+    assert len(named) == len(han19)
+    # Each marker's samples are the take's own: labeled right in nearly every frame.
+    right = total = 0
+    for m, name in enumerate(han19.names):
+        col = labeled.names.index(name)
+        f, p = np.nonzero(synth.labels == m)
+        ok = labeled.valid[f, col]
+        same = np.isclose(labeled.positions[f[ok], col], synth.take.positions[f[ok], p[ok]], atol=1e-5)
+        right += int(same.all(axis=1).sum())
+        total += len(f)
+    assert right / total > 0.99

@@ -172,7 +172,17 @@ def _join(take: Take, parts: list[Labeling], bounds, cuts: list[int], names: lis
     hands = dict(info.get("hands", {}))
     hands["count"] = max(p.info.get("hands", {}).get("count", 1) for p in parts)
     if len(parts) > 1:  # each window's hands in its own order: a re-solve hands them back
-        hands["by_hand_order"] = [p.info.get("hands", {}).get("by_hand_order") for p in parts]
+        facts = [p.info.get("hands", {}) for p in parts]
+        hands["by_hand_order"] = [f.get("by_hand_order") for f in facts]
+        if hands["count"] == 2:  # the labels are two hands', the left hand's first, in every window
+            hands["sides"] = ["left", "right"]
+            hands["naming"] = next((f["naming"] for f in facts if f.get("naming")), None)
+        sure = [f["confidence"] for f in facts if "confidence" in f]
+        if sure:
+            hands["confidence"] = min(sure)  # the least sure window's
+        warning = next((f["warning"] for f in facts if f.get("warning")), None)
+        if warning:
+            hands["warning"] = warning
     swaps = [[a + s, b + s] for p, (s, _) in zip(parts, bounds) for a, b in p.info.get("hands", {}).get("swaps", [])]
     if swaps:
         hands["swaps"] = swaps
