@@ -142,3 +142,58 @@ def test_the_label_command_labels_a_long_take_in_windows(han19, tmp_path):
         right += int(same.all(axis=1).sum())
         total += len(f)
     assert right / total > 0.99
+
+
+@pytest.fixture(scope="module")
+def long_one(han19):
+    return synthesize(han19, 3000, seed=11)
+
+
+def _middle_segment(lab, n_frames):
+    """A labeled segment of 50-400 frames in the middle third of the take."""
+    pick = np.flatnonzero((lab.label >= 0) & (lab.start > n_frames // 3) & (lab.stop < 2 * n_frames // 3)
+                          & (lab.length >= 50) & (lab.length <= 400))
+    return int(pick[0])
+
+
+def test_a_re_solve_labels_again_only_around_the_change(han19, long_one):
+    take = long_one.take
+    lab = label_take(take, han19)
+    assert lab.info["locks"] == [] and lab.info["splits"] == []
+    seg = _middle_segment(lab, take.n_frames)
+    wrong = (int(lab.label[seg]) + 1) % len(han19)
+    c = Constraint(int(lab.slot[seg]), int(lab.start[seg]), int(lab.stop[seg]), wrong)
+    full = label_take(take, han19, constraints=[c])
+    local = label_take(take, han19, constraints=[c], previous=lab)
+    (a, b), = local.info["relabeled"]
+    assert 0 < a < c.start and c.stop < b < take.n_frames  # a stretch around the correction, not the take
+    assert local.info["locks"] == [[c.slot, c.start, c.stop, wrong]]
+    _check_segments(local, take)
+    assert (local.per_sample() == full.per_sample()).mean() > 0.999
+    per = local.per_sample()[c.start:c.stop, c.slot]
+    assert (per[per != EMPTY] == wrong).all()
+    # Outside the stretch the earlier labeling is kept as it was.
+    assert (local.per_sample()[:a] == lab.per_sample()[:a]).all()
+    # The correction taken back: the stretch is labeled again without it.
+    undone = label_take(take, han19, previous=local)
+    assert undone.info["relabeled"] and undone.info["locks"] == []
+    assert (undone.per_sample() == lab.per_sample()).mean() > 0.999
+    # Nothing changed: the take is labeled whole, as before.
+    again = label_take(take, han19, previous=lab)
+    assert "relabeled" not in again.info and (again.per_sample() == lab.per_sample()).all()
+
+
+def test_a_two_hand_re_solve_labels_again_around_the_change(han19):
+    from mocap_autolabel.core.hands import relabel_options
+
+    two = two_hand_take(han19, 3000, seed=4, config=TwoHandConfig(close_share=0.0))
+    lab = label_take(two.take, han19)
+    seg = _middle_segment(lab, two.take.n_frames)
+    c = Constraint(int(lab.slot[seg]), int(lab.start[seg]), int(lab.stop[seg]), int(lab.label[seg]))
+    options = relabel_options(lab.info)
+    full = label_take(two.take, han19, constraints=[c], **options)
+    local = label_take(two.take, han19, constraints=[c], previous=lab, **options)
+    assert local.info["relabeled"] and local.names == lab.names
+    assert (local.per_sample() == full.per_sample()).mean() > 0.999
+    f, p = np.nonzero(local.per_sample() >= 0)
+    assert len(np.unique(f * 100 + local.per_sample()[f, p])) == len(f)  # no label twice in a frame

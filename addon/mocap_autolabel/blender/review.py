@@ -602,9 +602,11 @@ class LabelRequest:
             if say is not None:
                 say(self.stage)  # a cancelled job raises here, between stages
 
+        # A re-solve labels again only the frames around what the reviewer changed since.
         labeling = label_take(self.take, self.layout, method=self.method, temporal=self.temporal,
                               constraints=self.review.constraints, splits=self.review.splits,
-                              labeler=self.labeler, progress=staged, **self.hand_options)
+                              labeler=self.labeler, progress=staged, previous=None if check_layout else self.previous,
+                              **self.hand_options)
         if check_layout:  # as the command line does: the layout on one hand, the no-hand rule per hand
             one = labeling.info.get("hands", {}).get("count", 1) == 1
             staged("checking the layout against the other built-in layouts" if one else "checking both hands")

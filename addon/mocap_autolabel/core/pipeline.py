@@ -55,7 +55,7 @@ from .temporal.voting import (
     vote,
 )
 from .tracklets import find_crossings, find_tracklets
-from .windows import WINDOW_FRAMES, label_in_windows
+from .windows import WINDOW_FRAMES, label_in_windows, relabel_around
 
 #: Temporal modes: ``vote`` (trajectory voting with exclusivity, the default), ``viterbi``
 #: (Alexanderson's N-best + Kalman), ``none`` (per-frame labels as they come).
@@ -463,7 +463,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                done: Callable[[float], None] | None = None, hands: str | int = "auto",
                sides: Sequence[str] | None = None, naming: HandNaming | str | None = None,
                keep_named: bool = True, props: bool = True, exclude: np.ndarray | None = None,
-               hand_swaps: Sequence[Sequence[int]] | None = None, window: int | None = WINDOW_FRAMES) -> Labeling:
+               hand_swaps: Sequence[Sequence[int]] | None = None, window: int | None = WINDOW_FRAMES,
+               previous: Labeling | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -527,12 +528,25 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         window: a take of more frames is labeled in overlapping windows of this many
             (:mod:`.windows`: memory bounded by a window); None labels it whole. ``nearest``,
             which starts from the take's first frame, labels it whole.
+        previous: an earlier labeling of this take (a reviewer's re-solve): only the frames around
+            the corrections changed since (its ``info["locks"]`` and ``info["splits"]``) are
+            labeled again and ``previous`` is kept elsewhere (:func:`.windows.relabel_around`);
+            the take is labeled whole where that cannot be done.
 
     Returns:
         the :class:`Labeling`; ``info`` holds the settings and the time of each stage, and
         ``info["hands"]`` the hands found (count, sides with their evidence).
     """
     args = dict(locals())  # to label again without the props found, or in windows
+    constraints = args["constraints"] = list(constraints)
+    # The corrections the labeling honours, as given (a re-solve labels again what changed since).
+    locks = [[int(c.slot), int(c.start), int(c.stop), int(c.label)] for c in constraints]
+    cut_at = [[int(slot), int(frame)] for slot, frame in splits]
+
+    def recorded(labeling: Labeling) -> Labeling:
+        labeling.info["locks"], labeling.info["splits"] = locks, cut_at
+        return labeling
+
     if method not in METHODS:
         raise ValueError(f"unknown labeling method {method!r}; choose one of {', '.join(METHODS)}")
     if temporal not in TEMPORAL:
@@ -546,9 +560,19 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             raise ValueError(f"constraint {c} lies outside the take ({take.n_frames} frames, {take.n_points} slots)")
     if validate and temporal != "vote":
         raise ValueError("validate needs temporal='vote'")
+    if previous is not None and exclude is None and not validate and method not in ("nearest", "gmm"):
+        local = relabel_around(label_take, take, layout, previous, constraints, splits, hands=None,
+                               naming=naming, hand_swaps=hand_swaps, progress=progress, method=method,
+                               temporal=temporal, model=model, score=score, p=p, q=q, n_best=n_best,
+                               split_swaps=split_swaps, labeler=labeler, calibrate=calibrate, null_prior=null_prior,
+                               switch_cost=switch_cost, partner=partner, continuity=continuity,
+                               keep_named=keep_named, props=props)
+        if local is not None:
+            return recorded(local)
+    args["previous"] = None  # labeled whole from here on
     if window is not None and take.n_frames > window and method != "nearest":
         options = {key: value for key, value in args.items() if key not in ("take", "layout", "window")}
-        return label_in_windows(label_take, take, layout, window, **options)
+        return recorded(label_in_windows(label_take, take, layout, window, **options))
     say = progress or (lambda _msg: None)
     share = done or (lambda _share: None)
     # Shares of the work at each stage's start: scoring is most of a take's time with the ONNX
@@ -717,7 +741,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         again.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
         again.info["seconds"]["traded_places"] = round(sum(times.values()), 4)
         share(1.0)
-        return again
+        return recorded(again)
     share(decided)
     if validate:
         say("validating with the hand fit")
@@ -749,7 +773,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                 single.info["hands"].update(two_hands_rejected={"two": round(two, 4), "one": round(one, 4)})
                 single.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
                 share(1.0)
-                return single
+                return recorded(single)
     if props and temporal == "vote":
         t = time.perf_counter()
         found_props = _props(take, tracklets, labeling, len(hand_labels))
@@ -762,11 +786,11 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             again.info["props"] = [p.as_dict() for p in found_props]
             again.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
             share(1.0)
-            return again
+            return recorded(again)
     share(1.0)
     times["total"] = time.perf_counter() - t0
     info["seconds"] = {key: round(v, 4) for key, v in times.items()}
-    return labeling
+    return recorded(labeling)
 
 
 def _props(take: Take, tracklets, labeling: Labeling, n_labels: int) -> list[Prop]:

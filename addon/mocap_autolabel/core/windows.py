@@ -124,11 +124,14 @@ def label_in_windows(label: Callable[..., Labeling], take: Take, layout: Layout,
     return _join(take, parts, bounds, cuts, names)
 
 
-def _join(take: Take, parts: list[Labeling], bounds, cuts: list[int], names: list[str]) -> Labeling:
-    """One labeling of the take from its windows' (each kept between its cuts)."""
+def _splice(parts: list[Labeling], offsets: list[int], cuts: list[int], names: list[str], n_frames: int,
+            n_points: int) -> Labeling:
+    """One labeling of ``n_frames`` frames from ``parts``, part ``i`` (whose frame 0 is frame
+    ``offsets[i]`` of the whole) kept from ``cuts[i]`` to ``cuts[i + 1]``; labels mapped by name to
+    ``names``. ``info`` is left empty."""
     index = {name: i for i, name in enumerate(names)}
     pieces = []
-    for i, (part, (start, _)) in enumerate(zip(parts, bounds)):
+    for i, (part, start) in enumerate(zip(parts, offsets)):
         lo, hi = cuts[i] - start, cuts[i + 1] - start
         keep = (part.stop > lo) & (part.start < hi)
         to_global = np.array([index[n] for n in part.names], dtype=np.int64)
@@ -144,19 +147,27 @@ def _join(take: Take, parts: list[Labeling], bounds, cuts: list[int], names: lis
     order = np.lexsort((start, slot))
     slot, start, stop, label, confidence, locked, evidence = (
         a[order] for a in (slot, start, stop, label, confidence, locked, evidence))
-    # A trajectory both windows gave one label stays one segment (the lower confidence, the
-    # evidence of both weighed by their frames).
+    # A trajectory both parts gave one label (locked by both or by neither) stays one segment: the
+    # lower confidence, the evidence of both weighed by their frames.
     joins = np.flatnonzero((slot[1:] == slot[:-1]) & (start[1:] == stop[:-1]) & (label[1:] == label[:-1])
-                           & np.isin(start[1:], cuts[1:-1]))
+                           & (locked[1:] == locked[:-1]) & np.isin(start[1:], cuts[1:-1]))
     for j in joins[::-1]:
         w = evidence[[j, j + 1], 3].astype(np.float64)
         evidence[j, :3] = (evidence[j:j + 2, :3] * w[:, None]).sum(axis=0) / max(w.sum(), 1.0)
         evidence[j, 3] = w.sum()
         stop[j] = stop[j + 1]
         confidence[j] = min(confidence[j], confidence[j + 1])
-        locked[j] |= locked[j + 1]
     keep = np.ones(len(slot), dtype=bool)
     keep[joins + 1] = False
+    return Labeling(names=list(names), n_frames=n_frames, n_points=n_points, slot=slot[keep],
+                    start=start[keep], stop=stop[keep], label=label[keep].astype(np.int16),
+                    confidence=confidence[keep].astype(np.float32), locked=locked[keep], info={},
+                    evidence=evidence[keep].astype(np.float32))
+
+
+def _join(take: Take, parts: list[Labeling], bounds, cuts: list[int], names: list[str]) -> Labeling:
+    """One labeling of the take from its windows' (each kept between its cuts)."""
+    joined = _splice(parts, [start for start, _ in bounds], cuts, names, take.n_frames, take.n_points)
     info = dict(parts[0].info)
     info["frames"] = take.n_frames
     info["windows"] = [{"frames": [int(s) + take.first_frame, int(e) - 1 + take.first_frame],
@@ -191,7 +202,140 @@ def _join(take: Take, parts: list[Labeling], bounds, cuts: list[int], names: lis
              for p, (s, _) in zip(parts, bounds) for prop in p.info.get("props", [])]
     if props:
         info["props"] = props
-    return Labeling(names=list(names), n_frames=take.n_frames, n_points=take.n_points, slot=slot[keep],
-                    start=start[keep], stop=stop[keep], label=label[keep].astype(np.int16),
-                    confidence=confidence[keep].astype(np.float32), locked=locked[keep], info=info,
-                    evidence=evidence[keep].astype(np.float32))
+    joined.info = info
+    return joined
+
+
+#: Seconds on each side of what a reviewer changed that a re-solve labels again (at least
+#: :data:`MIN_PAD_FRAMES` frames): a correction moves the labels of trajectories that overlap it and
+#: of their neighbours; the cut back to the earlier labeling lies in the outer half of this margin.
+RESOLVE_PAD_S = 5.0
+MIN_PAD_FRAMES = 200
+#: A re-solve whose changes, with their margins, cover more than this share of the take labels it whole.
+LOCAL_SHARE = 0.5
+#: Samples of the margins outside the cuts that the local labeling must label as the earlier one
+#: did; fewer, and the take is labeled whole (the region's hands were told apart otherwise).
+AGREE = 0.9
+
+
+def changed_frames(previous: Labeling, constraints, splits) -> list[tuple[int, int]] | None:
+    """Frame ranges ``[(start, stop)]`` that a reviewer's corrections changed since ``previous``
+    was labeled: locks added, changed or removed, splits added or removed (``info["locks"]`` and
+    ``info["splits"]``, as :func:`.pipeline.label_take` records them). None where ``previous`` does
+    not record them."""
+    if "locks" not in previous.info or "splits" not in previous.info:
+        return None
+    before = {tuple(c) for c in previous.info["locks"]}
+    now = {(int(c.slot), int(c.start), int(c.stop), int(c.label)) for c in constraints}
+    ranges = [(c[1], c[2]) for c in before ^ now]
+    cuts_before = {tuple(s) for s in previous.info["splits"]}
+    cuts_now = {(int(slot), int(frame)) for slot, frame in splits}
+    ranges += [(f, f + 1) for _, f in cuts_before ^ cuts_now]
+    return sorted(ranges)
+
+
+def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, previous: Labeling,
+                   constraints=(), splits=(), hands=None, sides=None, naming=None, hand_swaps=None,
+                   progress: Callable[[str], None] | None = None, **options) -> Labeling | None:
+    """A re-solve that labels again only the frames around what a reviewer changed since
+    ``previous`` (:func:`changed_frames`, each range with :data:`RESOLVE_PAD_S` seconds on either
+    side) and keeps ``previous`` elsewhere: its time is that of the changed stretch, whatever the
+    take's length (a 10,000-frame two-hand take: about 4x faster than labeling it whole).
+
+    The stretch is labeled as a take of its own with the corrections that fall in it, each hand
+    with the side ``previous`` gave most of its markers there, and joined to ``previous`` at a cut
+    in the outer half of each margin where the fewest trajectories run through. A trajectory that
+    runs through a cut keeps ``previous``'s label outside it.
+
+    Returns:
+        the labeling, or None where the take must be labeled whole: nothing changed, the changes
+        cover most of the take, ``previous`` does not fit the take or records no corrections, or
+        the stretch's labeling disagrees with ``previous`` beyond the cuts (hands told apart
+        otherwise).
+    """
+    import time
+
+    from .labeling import EMPTY
+
+    t0 = time.perf_counter()
+    if (previous.n_frames, previous.n_points) != (take.n_frames, take.n_points):
+        return None
+    ranges = changed_frames(previous, constraints, splits)
+    if not ranges:
+        return None
+    pad = max(MIN_PAD_FRAMES, int(round(RESOLVE_PAD_S * take.rate)))
+    regions: list[list[int]] = []
+    for start, stop in ranges:
+        a, b = max(0, start - pad), min(take.n_frames, stop + pad)
+        if regions and a <= regions[-1][1]:
+            regions[-1][1] = max(regions[-1][1], b)
+        else:
+            regions.append([a, b])
+    if sum(b - a for a, b in regions) > LOCAL_SHARE * take.n_frames:
+        return None
+    two = previous.info.get("hands", {}).get("count", 1) == 2
+    before = previous.per_sample()
+    current = previous
+    for a, b in regions:
+        part = _window_take(take, a, b)
+        local = {"constraints": _window_constraints(constraints, a, b),
+                 "splits": [(s, f - a) for s, f in splits if a <= f < b],
+                 "hand_swaps": None if hand_swaps is None else
+                 [[max(x, a) - a, min(y, b) - a] for x, y in hand_swaps if max(x, a) < min(y, b)]}
+        if two:
+            local_sides = _sides_from(part, layout, before[a:b], naming, local["hand_swaps"])
+            if local_sides is None:
+                return None
+            local.update(hands=2, sides=local_sides, naming=naming)
+        else:
+            local.update(hands=1 if hands is None else hands, naming=naming)
+        if progress is not None:
+            progress(f"labeling frames {a}-{b - 1} again, around the changes")
+        new = label(part, layout, window=None, progress=progress, **local, **options)
+        if new.names != previous.names:
+            return None
+        cut_left = a if a == 0 else _quiet_frame(take.valid, a + pad // 4, a + pad // 2)
+        cut_right = b if b == take.n_frames else _quiet_frame(take.valid, b - pad // 2, b - pad // 4)
+        # Beyond the cuts the stretch's labeling must be the earlier one's, or the hands were mixed up.
+        mine = new.per_sample()
+        outside = np.zeros(b - a, dtype=bool)
+        outside[:cut_left - a] = True
+        outside[cut_right - a:] = True
+        seen = (before[a:b] != EMPTY) & outside[:, None]
+        if seen.any() and (mine[seen] == before[a:b][seen]).mean() < AGREE:
+            return None
+        current = _splice([current, new, current], [0, a, 0], [0, cut_left, cut_right, take.n_frames],
+                          list(previous.names), take.n_frames, take.n_points)
+    info = {key: value for key, value in previous.info.items() if key not in ("seconds", "locks", "splits")}
+    info["relabeled"] = [[int(a), int(b)] for a, b in regions]
+    info["seconds"] = {"total": round(time.perf_counter() - t0, 4)}
+    current.info = info
+    return current
+
+
+def _quiet_frame(valid: np.ndarray, lo: int, hi: int) -> int:
+    """The frame in ``[lo, hi)`` that the fewest trajectories run through (seen in it and the frame before)."""
+    lo, hi = max(lo, 1), max(hi, max(lo, 1) + 1)
+    through = (valid[lo - 1:hi - 1] & valid[lo:hi]).sum(axis=1)
+    return lo + int(np.argmin(through))
+
+
+def _sides_from(part: Take, layout: Layout, before: np.ndarray, naming, hand_swaps) -> list[str] | None:
+    """The sides of the two hands :func:`.hands.find_hands` finds in ``part``, in its order: the side
+    whose labels the earlier labeling ``before`` (``(F, P)`` of ``part``'s frames) gave most of each
+    hand's samples. None where both come out one side."""
+    from .hands import HandNaming, swap_frames
+    from .pipeline import _hands, other_named_points
+
+    naming = HandNaming(naming) if isinstance(naming, str) else naming
+    swaps = None if hand_swaps is None else swap_frames(hand_swaps, part.n_frames)
+    found = _hands(part, layout, 2, other_named_points(part, layout, naming), swaps)
+    if found.count != 2:
+        return None
+    m = len(layout)
+    sides = []
+    for h in range(2):
+        held = before[found.members(h)]
+        held = held[held >= 0]
+        sides.append("left" if (held < m).sum() >= (held >= m).sum() else "right")
+    return sides if sides[0] != sides[1] else None
