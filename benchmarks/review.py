@@ -141,7 +141,7 @@ def main() -> None:
             blend = os.path.join(tmp, "review.blend")
             note("save .blend", timed(bpy.ops.wm.save_as_mainfile, filepath=blend))
             note("open .blend", timed(bpy.ops.wm.open_mainfile, filepath=blend))
-            note("re-solve after reopening (scores recomputed)", timed(bpy.ops.mocap_autolabel.resolve))
+            note("re-solve after reopening, nothing changed (the whole take)", timed(bpy.ops.mocap_autolabel.resolve))
             summary = load_state(bpy.context.scene.mocap_autolabel.take)
             constraints = len(summary.review.constraints)
             # Solve Hand as the panel runs it: on a job, reporting its stage and share done
@@ -162,8 +162,8 @@ def main() -> None:
               "Bars: label + colour of a 10,000-frame han19 take at most 5 s, re-solve under 1 s (issue 7, one "
               "hand); re-solve after a correction under 1.5 s (issue 32, two hands). A re-solve labels again "
               "only the frames within 5 s of the corrections changed since the last labeling "
-              "(`core/windows.py: relabel_around`); after reopening, the per-frame scores of that stretch "
-              "are computed again."]
+              "(`core/windows.py: relabel_around`); a re-solve with nothing changed since (here the one "
+              "after reopening) labels the whole take, its per-frame scores computed again."]
     if progress:
         lines += ["", "## Solve Hand's progress", "",
                   f"Solve Hand on the reopened take (first run), as the panel runs it (a job that reports its "
