@@ -1,4 +1,4 @@
-"""Shared fixtures: the real data folder (tests skip without it) and the bpy module."""
+"""Shared fixtures: the real data folder (tests skip without it), the bpy module, the han19 layout."""
 
 from __future__ import annotations
 
@@ -41,3 +41,11 @@ def empty_scene(bpy_module):
     if "mocap_autolabel" not in bpy_module.context.preferences.addons:  # factory settings (a CLI run) drop it
         addon_utils.enable("mocap_autolabel", default_set=True)
     return bpy_module.context.scene
+
+
+@pytest.fixture(scope="session")
+def han19():
+    """The built-in han19 layout (one hand, 19 markers)."""
+    from mocap_autolabel.core.layout import load_layout
+
+    return load_layout("han19")

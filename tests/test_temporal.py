@@ -307,11 +307,6 @@ def test_segments_from_runs_round_trip():
 
 
 @pytest.fixture(scope="module")
-def han19():
-    return load_layout("han19")
-
-
-@pytest.fixture(scope="module")
 def synth_take(han19):
     return synthesize(han19, 1500, seed=11)
 

@@ -35,11 +35,6 @@ from mocap_autolabel.core.take import Take, read_take
 
 
 @pytest.fixture(scope="module")
-def han19():
-    return load_layout("han19")
-
-
-@pytest.fixture(scope="module")
 def apart(han19):
     """Two hands that stay apart (no contact phases): 400 frames."""
     return two_hand_take(han19, 400, seed=3, config=TwoHandConfig(close_share=0.0))

@@ -5,17 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint
-from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import synthesize
 from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take
 from mocap_autolabel.core.take import Take
 from mocap_autolabel.core.windows import window_bounds
-
-
-@pytest.fixture(scope="module")
-def han19():
-    return load_layout("han19")
 
 
 @pytest.fixture(scope="module")
