@@ -92,21 +92,30 @@ def _take_key(take: Take) -> tuple:
     return take.positions.shape, take.rate, hash(take.positions.tobytes())
 
 
-#: The crossings of the last few takes: a re-solve after a reviewer's correction labels the same
-#: positions again (a tenth of a second on a 10,000-frame take).
+#: Takes whose per-take results are remembered (a re-solve after a reviewer's correction labels
+#: the same positions again).
+REMEMBERED_TAKES = 4
+
+
+def _remembered(cache: dict, key: tuple, make: Callable[[], object]):
+    """``make()`` for ``key``, kept in ``cache`` for the last :data:`REMEMBERED_TAKES` keys."""
+    if key not in cache:
+        while len(cache) >= REMEMBERED_TAKES:
+            cache.pop(next(iter(cache)))
+        cache[key] = make()
+    return cache[key]
+
+
+#: The crossings of the last few takes (a tenth of a second on a 10,000-frame take).
 _CROSSINGS: dict[tuple, dict[int, list[int]]] = {}
 
 
 def _crossings(take: Take) -> dict[int, list[int]]:
-    key = _take_key(take)
-    if key not in _CROSSINGS:
-        while len(_CROSSINGS) >= 4:
-            _CROSSINGS.pop(next(iter(_CROSSINGS)))
-        _CROSSINGS[key] = find_crossings(take)
-    return {slot: list(frames) for slot, frames in _CROSSINGS[key].items()}  # callers may extend theirs
+    found = _remembered(_CROSSINGS, _take_key(take), lambda: find_crossings(take))
+    return {slot: list(frames) for slot, frames in found.items()}  # callers may extend theirs
 
 
-#: The hands found in the last few takes: a re-solve after a reviewer's correction asks again.
+#: The hands found in the last few takes.
 _HANDS: dict[tuple, Hands] = {}
 
 
@@ -115,12 +124,13 @@ def _hands(take: Take, layout: Layout, hands: str | int, ignore: np.ndarray | No
     """:func:`.hands.find_hands`, remembered for the last few takes (a copy: callers change ``both``)."""
     key = (*_take_key(take), tuple(layout.names), str(hands),
            None if ignore is None else ignore.tobytes(), None if swaps is None else swaps.tobytes())
-    if key not in _HANDS:
-        while len(_HANDS) >= 4:
-            _HANDS.pop(next(iter(_HANDS)))
-        _HANDS[key] = find_hands(take, layout, hands, ignore=ignore, swaps=swaps)
-    found = _HANDS[key]
+    found = _remembered(_HANDS, key, lambda: find_hands(take, layout, hands, ignore=ignore, swaps=swaps))
     return replace(found, both=found.both.copy(), hand=found.hand.copy(), info=dict(found.info))
+
+
+#: The rigid groups of the last few takes (:func:`.props.rigid_groups`: the take's own, whatever
+#: its labels; 0.2 s of a 10,000-frame two-hand take).
+_RIGID_GROUPS: dict[tuple, list[np.ndarray]] = {}
 
 
 def _labeler(method: str, layout: Layout, model, fit: np.ndarray | None, start: np.ndarray | None, take: Take,
@@ -377,11 +387,11 @@ def _joint_scores(hand_scores: Sequence[np.ndarray], found: Hands, batch: FrameB
     return joint
 
 
-def _offer_nulls(found: Hands, labeling: Labeling, take: Take, apply: bool = True) -> tuple[int, np.ndarray]:
+def _offer_nulls(found: Hands, labeling: Labeling, take: Take, most: float = np.inf) -> tuple[int, np.ndarray]:
     """Offer to both hands the samples of null segments whose trajectory went to one hand but
     passes within :data:`.hands.HAND_RADIUS` of the other hand's centre; returns how many segments,
-    and the frames they hold (to score again). Changes ``found.both`` in place (``apply``; else
-    only counts them)."""
+    and the frames they hold (to score again). Changes ``found.both`` in place, unless more than
+    ``most`` segments would be offered (then nothing is offered and no frames are returned)."""
     from .hands import HAND_RADIUS
 
     per = labeling.per_sample()
@@ -394,7 +404,7 @@ def _offer_nulls(found: Hands, labeling: Labeling, take: Take, apply: bool = Tru
     chosen = np.unique(seg[f[near], p[near]])
     if not len(chosen):
         return 0, np.zeros(0, dtype=np.int64)
-    if not apply:
+    if len(chosen) > most:
         return int(len(chosen)), np.zeros(0, dtype=np.int64)
     offer = np.isin(seg, chosen) & null
     found.both |= offer
@@ -560,18 +570,16 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             raise ValueError(f"constraint {c} lies outside the take ({take.n_frames} frames, {take.n_points} slots)")
     if validate and temporal != "vote":
         raise ValueError("validate needs temporal='vote'")
+    args["previous"] = None  # what follows labels the take (or its parts) whole
     if previous is not None and exclude is None and not validate and method not in ("nearest", "gmm"):
-        local = relabel_around(label_take, take, layout, previous, constraints, splits, hands=None,
-                               naming=naming, hand_swaps=hand_swaps, progress=progress, method=method,
-                               temporal=temporal, model=model, score=score, p=p, q=q, n_best=n_best,
-                               split_swaps=split_swaps, labeler=labeler, calibrate=calibrate, null_prior=null_prior,
-                               switch_cost=switch_cost, partner=partner, continuity=continuity,
-                               keep_named=keep_named, props=props)
+        # The stretch takes its count of hands and their sides from ``previous``.
+        options = {key: value for key, value in args.items()
+                   if key not in ("take", "layout", "previous", "window", "hands", "sides")}
+        local = relabel_around(label_take, take, layout, previous, **options)
         if local is not None:
             return recorded(local)
-    args["previous"] = None  # labeled whole from here on
     if window is not None and take.n_frames > window and method != "nearest":
-        options = {key: value for key, value in args.items() if key not in ("take", "layout", "window")}
+        options = {key: value for key, value in args.items() if key not in ("take", "layout", "window", "previous")}
         return recorded(label_in_windows(label_take, take, layout, window, **options))
     say = progress or (lambda _msg: None)
     share = done or (lambda _share: None)
@@ -690,9 +698,10 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         still to be read off it; where more than :data:`LOOK_EARLY_SHARE` of its segments would
         be offered (hands that touch), nothing is done: the look waits for the whole labeling."""
         nonlocal hand_scores, joint, scores, member, samples
-        if early and _offer_nulls(found, looked_at, take_in, apply=False)[0] > LOOK_EARLY_SHARE * len(looked_at):
+        most = LOOK_EARLY_SHARE * len(looked_at) if early else np.inf
+        offered, rows = _offer_nulls(found, looked_at, take_in, most)
+        if offered > most:
             return None
-        offered, rows = _offer_nulls(found, looked_at, take_in)
         info["hands_offered_again"] = offered
         if not offered:
             return None
@@ -802,18 +811,8 @@ def _props(take: Take, tracklets, labeling: Labeling, n_labels: int) -> list[Pro
     votes = np.bincount(ids[f, p].astype(np.int64) * (n_labels + 1) + (per[f, p].astype(np.int64) + 1),
                         minlength=len(tracklets) * (n_labels + 1)).reshape(len(tracklets), n_labels + 1)
     positions = np.where(take.valid[..., None], take.positions, np.nan)
-    key = _take_key(take)
-    if key not in _RIGID_GROUPS:
-        while len(_RIGID_GROUPS) >= 4:
-            _RIGID_GROUPS.pop(next(iter(_RIGID_GROUPS)))
-        _RIGID_GROUPS[key] = rigid_groups(positions, tracklets, take.rate)
-    return find_props(positions, tracklets, take.rate, votes.argmax(axis=1) - 1, groups=_RIGID_GROUPS[key])
-
-
-#: The rigid groups of the last few takes (:func:`.props.rigid_groups`: the take's own, whatever
-#: its labels): a re-solve after a reviewer's correction looks for props again (0.2 s of a
-#: 10,000-frame two-hand take).
-_RIGID_GROUPS: dict[tuple, list[np.ndarray]] = {}
+    groups = _remembered(_RIGID_GROUPS, _take_key(take), lambda: rigid_groups(positions, tracklets, take.rate))
+    return find_props(positions, tracklets, take.rate, votes.argmax(axis=1) - 1, groups=groups)
 
 
 def score_samples(scores: np.ndarray, batch: FrameBatch, rows: np.ndarray | None = None,

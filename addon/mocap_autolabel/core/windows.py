@@ -12,12 +12,13 @@ the overlap of it on the other side of the cut; where the two agree it stays one
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
 
-from .labeling import Constraint, Labeling
+from .labeling import EMPTY, Labeling
 from .layout import Layout
 from .take import Take
 
@@ -44,25 +45,33 @@ def window_bounds(frames: int, window: int = WINDOW_FRAMES, overlap: int = OVERL
 
 
 def _cuts(valid: np.ndarray, bounds: list[tuple[int, int]]) -> list[int]:
-    """The frame where each window hands over to the next: in the middle half of their overlap,
-    where the fewest slots are seen in a frame and the one before it."""
-    cuts = [0]
-    for (_, stop), (start, _) in zip(bounds[:-1], bounds[1:]):
-        lo, hi = start + (stop - start) // 4, stop - (stop - start) // 4
-        lo, hi = max(lo, 1), max(hi, lo + 1)
-        through = (valid[lo - 1:hi - 1] & valid[lo:hi]).sum(axis=1)
-        cuts.append(lo + int(np.argmin(through)))
-    cuts.append(valid.shape[0])
-    return cuts
+    """The frame where each window hands over to the next: the quietest in the middle half of
+    their overlap (:func:`_quiet_frame`)."""
+    middles = [_quiet_frame(valid, start + (stop - start) // 4, stop - (stop - start) // 4)
+               for (_, stop), (start, _) in zip(bounds[:-1], bounds[1:])]
+    return [0, *middles, valid.shape[0]]
 
 
-def _window_constraints(constraints, start: int, stop: int) -> list[Constraint]:
-    out = []
+def _quiet_frame(valid: np.ndarray, lo: int, hi: int) -> int:
+    """The frame in ``[lo, hi)`` that the fewest trajectories run through (seen in it and the frame before)."""
+    lo = max(lo, 1)
+    hi = max(hi, lo + 1)
+    through = (valid[lo - 1:hi - 1] & valid[lo:hi]).sum(axis=1)
+    return lo + int(np.argmin(through))
+
+
+def _corrections_in(start: int, stop: int, constraints, splits, hand_swaps) -> dict:
+    """``label_take`` keywords: the constraints, splits and hands' swaps that fall in frames
+    ``[start, stop)``, in that stretch's own frames."""
+    clipped = []
     for c in constraints:
         a, b = max(c.start, start), min(c.stop, stop)
         if a < b:
-            out.append(replace(c, start=a - start, stop=b - start))
-    return out
+            clipped.append(replace(c, start=a - start, stop=b - start))
+    return {"constraints": clipped,
+            "splits": [(slot, frame - start) for slot, frame in splits if start <= frame < stop],
+            "hand_swaps": None if hand_swaps is None else
+            [[max(a, start) - start, min(b, stop) - start] for a, b in hand_swaps if max(a, start) < min(b, stop)]}
 
 
 def _window_take(take: Take, start: int, stop: int) -> Take:
@@ -96,18 +105,15 @@ def label_in_windows(label: Callable[..., Labeling], take: Take, layout: Layout,
     bounds = window_bounds(take.n_frames, window, overlap)
     cuts = _cuts(take.valid, bounds)
     say = progress or (lambda _msg: None)
+    per_window = sides is not None and len(sides) > 0 and not isinstance(sides[0], str)
 
     def one(i: int, naming) -> Labeling:
         start, stop = bounds[i]
         say(f"window {i + 1} of {len(bounds)}: frames {start}-{stop - 1}")
-        swaps = None if hand_swaps is None else [[max(a, start) - start, min(b, stop) - start]
-                                                  for a, b in hand_swaps if max(a, start) < min(b, stop)]
         inner_done = None if done is None else (lambda share, i=i: done((i + share) / len(bounds)))
-        per_window = sides is not None and len(sides) > 0 and not isinstance(sides[0], str)
         return label(_window_take(take, start, stop), layout,
-                     constraints=_window_constraints(constraints, start, stop),
-                     splits=[(s, f - start) for s, f in splits if start <= f < stop],
-                     exclude=None if exclude is None else exclude[start:stop], hand_swaps=swaps,
+                     **_corrections_in(start, stop, constraints, splits, hand_swaps),
+                     exclude=None if exclude is None else exclude[start:stop],
                      naming=naming, sides=sides[i] if per_window else sides, progress=progress, done=inner_done,
                      window=None, **options)
 
@@ -235,7 +241,7 @@ def changed_frames(previous: Labeling, constraints, splits) -> list[tuple[int, i
 
 
 def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, previous: Labeling,
-                   constraints=(), splits=(), hands=None, sides=None, naming=None, hand_swaps=None,
+                   constraints=(), splits=(), naming=None, hand_swaps=None,
                    progress: Callable[[str], None] | None = None, **options) -> Labeling | None:
     """A re-solve that labels again only the frames around what a reviewer changed since
     ``previous`` (:func:`changed_frames`, each range with :data:`RESOLVE_PAD_S` seconds on either
@@ -245,7 +251,7 @@ def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, p
     The stretch is labeled as a take of its own with the corrections that fall in it, each hand
     with the side ``previous`` gave most of its markers there, and joined to ``previous`` at a cut
     in the outer half of each margin where the fewest trajectories run through. A trajectory that
-    runs through a cut keeps ``previous``'s label outside it.
+    runs through a cut keeps ``previous``'s label outside it. ``options`` go to ``label``.
 
     Returns:
         the labeling, or None where the take must be labeled whole: nothing changed, the changes
@@ -253,10 +259,6 @@ def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, p
         the stretch's labeling disagrees with ``previous`` beyond the cuts (hands told apart
         otherwise).
     """
-    import time
-
-    from .labeling import EMPTY
-
     t0 = time.perf_counter()
     if (previous.n_frames, previous.n_points) != (take.n_frames, take.n_points):
         return None
@@ -278,20 +280,17 @@ def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, p
     current = previous
     for a, b in regions:
         part = _window_take(take, a, b)
-        local = {"constraints": _window_constraints(constraints, a, b),
-                 "splits": [(s, f - a) for s, f in splits if a <= f < b],
-                 "hand_swaps": None if hand_swaps is None else
-                 [[max(x, a) - a, min(y, b) - a] for x, y in hand_swaps if max(x, a) < min(y, b)]}
+        local = _corrections_in(a, b, constraints, splits, hand_swaps)
         if two:
             local_sides = _sides_from(part, layout, before[a:b], naming, local["hand_swaps"])
             if local_sides is None:
                 return None
-            local.update(hands=2, sides=local_sides, naming=naming)
+            local.update(hands=2, sides=local_sides)
         else:
-            local.update(hands=1 if hands is None else hands, naming=naming)
+            local.update(hands=1)
         if progress is not None:
             progress(f"labeling frames {a}-{b - 1} again, around the changes")
-        new = label(part, layout, window=None, progress=progress, **local, **options)
+        new = label(part, layout, window=None, naming=naming, progress=progress, **local, **options)
         if new.names != previous.names:
             return None
         cut_left = a if a == 0 else _quiet_frame(take.valid, a + pad // 4, a + pad // 2)
@@ -311,13 +310,6 @@ def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, p
     info["seconds"] = {"total": round(time.perf_counter() - t0, 4)}
     current.info = info
     return current
-
-
-def _quiet_frame(valid: np.ndarray, lo: int, hi: int) -> int:
-    """The frame in ``[lo, hi)`` that the fewest trajectories run through (seen in it and the frame before)."""
-    lo, hi = max(lo, 1), max(hi, max(lo, 1) + 1)
-    through = (valid[lo - 1:hi - 1] & valid[lo:hi]).sum(axis=1)
-    return lo + int(np.argmin(through))
 
 
 def _sides_from(part: Take, layout: Layout, before: np.ndarray, naming, hand_swaps) -> list[str] | None:
