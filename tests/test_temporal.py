@@ -702,15 +702,20 @@ def test_a_thumb_tip_read_as_null_is_labeled_at_its_rigid_distance_from_thumb_ip
 
     s = synthesize(han19, 300, seed=5, config=clean_config())
     tip = han19.names.index("ThumbTip")
+    batch = pack_frames(s.take.positions, max_points=64)
+    f, k = np.nonzero(batch.mask)
+    of_position = {tuple(batch.points[a, b]): int(s.labels[a, batch.slots[a, b]]) for a, b in zip(f, k)}
 
     class TruthLabeler(Labeler):
         layout = han19
 
         def scores(self, points, mask):
-            batch = pack_frames(s.take.positions, max_points=points.shape[1])
-            truth = np.take_along_axis(s.labels, np.maximum(batch.slots, 0), axis=1)
-            p = np.full(points.shape[:2] + (len(han19) + 1,), 0.002)
+            # Called on some of the take's frames (the vote scores every other frame of a
+            # trajectory): each observation's truth is the take sample at its position.
+            truth = np.full(mask.shape, -1)
             rows, cols = np.nonzero(mask)
+            truth[rows, cols] = [of_position[tuple(points[r, c])] for r, c in zip(rows, cols)]
+            p = np.full(points.shape[:2] + (len(han19) + 1,), 0.002)
             p[rows, cols, truth[rows, cols]] = 0.9
             thumb = mask & (truth == tip)
             p[thumb, tip], p[thumb, -1] = 0.4, 0.55

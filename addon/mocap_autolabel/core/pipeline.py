@@ -46,6 +46,7 @@ from .temporal.confidence import (
 )
 from .temporal.continuity import continuity_logp
 from .temporal.partners import RigidPairs, partner_logp, rigid_pairs, take_distances
+from .temporal.stride import stride_for, strided_scores
 from .temporal.voting import (
     LOG_FLOOR,
     Samples,
@@ -309,10 +310,12 @@ def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = N
 
 
 def _hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBatch, labeler: Labeler,
-                 rows: np.ndarray) -> np.ndarray:
+                 rows: np.ndarray, segments: Segments, stride: int, every: np.ndarray) -> np.ndarray:
     """One hand's scores ``(R, K, M + 1)`` of the ``rows`` (frame indices) of the joint ``batch``, in
     its columns: the points ``members`` (bool ``(F, P)``) offers to the hand, scored by ``labeler``
-    on their own; NaN where the hand was not offered the point."""
+    on their own (every ``stride``-th frame of each of the ``segments``, and every frame where
+    ``every`` (bool ``(F,)``): :func:`.temporal.stride.strided_scores`); NaN where the hand was not
+    offered the point."""
     m = len(layout)
     mask, slots = batch.mask[rows], batch.slots[rows]
     frames, k = mask.shape
@@ -322,7 +325,7 @@ def _hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBa
     column[f_idx, slots[f_idx, k_idx]] = k_idx
     positions = np.where(members[rows][..., None], take.positions[rows], np.nan).astype(np.float32)
     part = _pack(replace(take, positions=positions, residuals=None, filled=None), _cap(layout))
-    scores = labeler.scores(part.points, part.mask)
+    scores = strided_scores(labeler.scores, part, segments, stride, frames=rows, every=every[rows])
     pf, pk = np.nonzero(part.mask)
     jk = column[pf, part.slots[pf, pk]]
     ok = jk >= 0
@@ -337,13 +340,25 @@ _HAND_SCORES: dict[tuple, list[tuple[np.ndarray, np.ndarray]]] = {}
 HAND_SCORES_BYTES = 256 * 2 ** 20
 
 
-def _all_hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBatch,
-                     labeler: Labeler, known: Sequence[tuple[np.ndarray, np.ndarray]] = ()) -> np.ndarray:
+#: Hands whose centres are nearer than this (metres) are scored on every frame, whatever the
+#: stride: where they touch, which points a hand holds changes from frame to frame.
+NEAR_HANDS = 0.15
+
+
+def _hands_near(found: Hands) -> np.ndarray:
+    """bool ``(F,)``: frames where the two hands' centres are nearer than :data:`NEAR_HANDS`."""
+    with np.errstate(invalid="ignore"):
+        return np.linalg.norm(found.centre[:, 0] - found.centre[:, 1], axis=1) < NEAR_HANDS
+
+
+def _all_hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: FrameBatch, labeler: Labeler,
+                     segments: Segments, stride: int, every: np.ndarray,
+                     known: Sequence[tuple[np.ndarray, np.ndarray]] = ()) -> np.ndarray:
     """:func:`_hand_scores` of every frame, re-using ``known`` ``(members, scores)`` of this take
     and those kept of the last take labeled, where a hand was offered the same points (the frames
     where it was not are scored again). ``known`` scores not kept are the caller's to give up:
     one is changed in place (a long take's are hundreds of megabytes)."""
-    key = (*_take_key(take), getattr(labeler, "path", id(labeler)), batch.mask.shape, tuple(layout.names))
+    key = (*_take_key(take), getattr(labeler, "path", id(labeler)), batch.mask.shape, tuple(layout.names), stride)
     kept = _HAND_SCORES.get(key, [])
     best, changed = None, None
     for old_members, old_scores in [*known, *kept]:
@@ -351,11 +366,12 @@ def _all_hand_scores(take: Take, layout: Layout, members: np.ndarray, batch: Fra
         if changed is None or len(rows) < len(changed):
             best, changed = old_scores, rows
     if best is None or len(changed) > 0.5 * len(members):
-        scores = _hand_scores(take, layout, members, batch, labeler, np.arange(take.n_frames))
+        scores = _hand_scores(take, layout, members, batch, labeler, np.arange(take.n_frames), segments, stride, every)
     else:
         scores = best.copy() if any(best is s for _, s in kept) else best
         if len(changed):
-            scores[changed] = _hand_scores(take, layout, members, batch, labeler, changed)
+            scores[changed] = _hand_scores(take, layout, members, batch, labeler, changed, segments, stride,
+                                           every)
     if scores.nbytes * 4 <= HAND_SCORES_BYTES:  # both hands, before and after a second look
         if key not in _HAND_SCORES:
             _HAND_SCORES.clear()
@@ -474,7 +490,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
                sides: Sequence[str] | None = None, naming: HandNaming | str | None = None,
                keep_named: bool = True, props: bool = True, exclude: np.ndarray | None = None,
                hand_swaps: Sequence[Sequence[int]] | None = None, window: int | None = WINDOW_FRAMES,
-               previous: Labeling | None = None) -> Labeling:
+               previous: Labeling | None = None, stride: int | None = None) -> Labeling:
     """Label every sample of ``take`` with ``layout``'s labels or null.
 
     Args:
@@ -542,6 +558,10 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
             the corrections changed since (its ``info["locks"]`` and ``info["splits"]``) are
             labeled again and ``previous`` is kept elsewhere (:func:`.windows.relabel_around`);
             the take is labeled whole where that cannot be done.
+        stride: with ``temporal="vote"``, the labeler scores every ``stride``-th frame of each
+            trajectory and the samples between take their neighbours' scores
+            (:mod:`.temporal.stride`; 1 scores every frame); default: a frame every 1/30 s
+            (:func:`.temporal.stride.stride_for` the take's rate).
 
     Returns:
         the :class:`Labeling`; ``info`` holds the settings and the time of each stage, and
@@ -623,6 +643,17 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         take_in = take
     batch = _pack(take_in, _cap(layout) * found.count)
     points, mask, slots = batch.points, batch.mask, batch.slots
+    tracklets = find_tracklets(take)
+    cuts: dict[int, list[int]] = {}
+    for c in constraints:
+        cuts.setdefault(c.slot, []).extend([c.start, c.stop])
+    for slot, frame in list(splits) + found.cuts:
+        cuts.setdefault(int(slot), []).append(int(frame))
+    segments = split_segments(Segments(tracklets.slot.astype(np.int64), tracklets.start, tracklets.stop), cuts)
+    if temporal != "vote":
+        stride = 1  # the other modes decide frame by frame
+    elif stride is None:
+        stride = stride_for(take.rate)
     times["pack"] = time.perf_counter() - t
 
     say(f"scoring {take.n_frames} frames with {method}")
@@ -632,7 +663,9 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         labeler = labeler or make_labeler(method, layout, model)
         every = np.arange(take.n_frames)
         scored_members = [found.members(h) for h in range(2)]
-        hand_scores = [_all_hand_scores(take_in, layout, scored_members[h], batch, labeler) for h in range(2)]
+        near = _hands_near(found)
+        hand_scores = [_all_hand_scores(take_in, layout, scored_members[h], batch, labeler, segments, stride, near)
+                       for h in range(2)]
         joint = scores = _joint_scores(hand_scores, found, batch, every)
     else:
         labeler = labeler or _labeler(method, layout, model, fit, start, take, batch)
@@ -640,27 +673,20 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         if hooked:  # ONNX labelers report each batch of frames
             labeler.on_batch = lambda part: share(0.02 + (scored - 0.02) * part)
         try:
-            scores = labeler.scores(points, mask)
+            scores = strided_scores(labeler.scores, batch, segments, stride)
         finally:
             if hooked:
                 labeler.on_batch = None
     share(scored)
     scores = _apply_constraints(scores, slots, mask, constraints)
     times["scores"] = time.perf_counter() - t
-
-    tracklets = find_tracklets(take)
-    cuts: dict[int, list[int]] = {}
-    for c in constraints:
-        cuts.setdefault(c.slot, []).extend([c.start, c.stop])
-    for slot, frame in list(splits) + found.cuts:
-        cuts.setdefault(int(slot), []).append(int(frame))
     crossings = _crossings(take) if split_swaps and temporal == "vote" else {}
-    segments = split_segments(Segments(tracklets.slot.astype(np.int64), tracklets.start, tracklets.stop), cuts)
+
     locked_at = np.full(valid.shape, EMPTY, dtype=np.int16)  # the locked label of each sample
     for c in constraints:
         locked_at[c.start:c.stop, c.slot] = np.where(valid[c.start:c.stop, c.slot], c.label, EMPTY)
     info = {"method": method, "temporal": temporal, "layout": layout.name, "frames": take.n_frames,
-            "slots": take.n_points, "constraints": len(constraints)}
+            "slots": take.n_points, "constraints": len(constraints), "stride": stride}
 
     if null_prior is None:
         null_prior = load_null_prior(method, temporal, layout.name) if score == "likelihood" else (0.0, 0.0)
@@ -709,7 +735,7 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         t = time.perf_counter()
         # A hand whose points did not change keeps its scores (those of a long take are not kept
         # between calls: passed on here).
-        hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler,
+        hand_scores = [_all_hand_scores(take_in, layout, found.members(h), batch, labeler, segments, stride, near,
                                         [(scored_members[h], hand_scores[h])]) for h in range(2)]
         joint = joint.copy()
         joint[rows] = _joint_scores(hand_scores, found, batch, rows)
