@@ -101,10 +101,10 @@ def test_label_acts_on_the_panels_take_and_never_drops_corrections_silently(labe
     assert settings.layout == "han19"  # the Layout field follows the take (the one it was labeled with)
     settings.take = glove
     assert settings.layout == "glove13"
-    wrong = import_written(bpy, synthesize(load_layout("glove13"), 300, seed=1).take, tmp_path, "glove1")
+    wrong = import_written(bpy, synthesize(load_layout("glove13"), 300, seed=4).take, tmp_path, "glove1")
     settings.layout = "han19"
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
-    for name, op in (("ThumbTip", bpy.ops.mocap_autolabel.lock), ("IndexTip", bpy.ops.mocap_autolabel.unlabel)):
+    for name, op in (("ThumbIP", bpy.ops.mocap_autolabel.lock), ("IndexTip", bpy.ops.mocap_autolabel.unlabel)):
         lab = state(wrong).labeling
         seg = _long_segment(lab, lab.names.index(name))
         bpy.context.scene.frame_set(int(lab.start[seg]) + 2)
@@ -117,7 +117,7 @@ def test_label_acts_on_the_panels_take_and_never_drops_corrections_silently(labe
     out = capfd.readouterr().out
     unlabel = before.review.constraints[1]
     assert state(wrong).layout == "glove13" and state(wrong).review.constraints == [unlabel]
-    assert "dropped" in out and "ThumbTip on" in out and "1 correction kept" in out
+    assert "dropped" in out and "ThumbIP on" in out and "1 correction kept" in out
     per = state(wrong).labeling.per_sample()[unlabel.start:unlabel.stop, unlabel.slot]
     assert (per[per != EMPTY] == NULL).all()
 
@@ -298,7 +298,7 @@ def test_the_label_operators_own_properties_win_over_the_panels(empty_scene, bpy
     """On a glove13 take (labeling it with han19 only warns; a han19 take labeled with glove13 is
     refused now, no glove13 hand in it, which this test used before)."""
     bpy = bpy_module
-    coll = import_written(bpy, synthesize(load_layout("glove13"), 300, seed=1).take, tmp_path, "glove1")
+    coll = import_written(bpy, synthesize(load_layout("glove13"), 300, seed=4).take, tmp_path, "glove1")
     settings = bpy.context.scene.mocap_autolabel
     assert settings.layout == "han19"
     assert bpy.ops.mocap_autolabel.label(layout="glove13") == {"FINISHED"}

@@ -118,7 +118,7 @@ def test_label_demo_take_writes_labeled_c3d_report_and_labels(capsys, tmp_path):
 
 def test_label_with_the_wrong_layout_warns_or_refuses_and_names_the_right_one(capsys, tmp_path):
     take = tmp_path / "glove.c3d"  # a glove13 take labeled with han19: a hand, but the wrong layout
-    write_c3d(synthesize(load_layout("glove13"), 300, seed=1).take, take)
+    write_c3d(synthesize(load_layout("glove13"), 300, seed=4).take, take)  # half a han19 hand in most frames
     report = tmp_path / "report.json"
     assert main(["label", str(take), "--report", str(report)]) == 0
     text = capsys.readouterr().out
@@ -217,7 +217,8 @@ def test_foreseeable_failures_say_what_is_wrong_in_one_line(capsys, tmp_path):
     vicon = str(data_path("c3d", "ezc3d-testFiles", "Vicon.c3d"))
     assert main(["label", vicon, "--validate"]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.startswith(f"error: {vicon}: IK validation: no frame has 4 or more han19 markers labeled")
+    # A body capture: too few labels for a hand, or labels scattered wider than any hand.
+    assert err.startswith(f"error: {vicon}: IK validation: ") and "no hand found (is this a han19 take?)" in err
     assert "unexpected" not in err and len(err.splitlines()) == 1
 
 

@@ -45,7 +45,11 @@ def fit_labeling(take: Take, layout: Layout, labeling: Labeling, calibration: Ca
         confident = np.where((conf >= sure)[..., None], observed, np.nan)
         if (np.isfinite(confident[..., 0]).sum(axis=1) >= max(MIN_MARKERS, int(0.7 * len(layout)))).sum() < 8:
             confident = observed  # too few sure frames: use everything
-        calibration = calibrate(confident, layout, frames=15, iterations=24, rounds=2)
+        try:
+            calibration = calibrate(confident, layout, frames=15, iterations=24, rounds=2)
+        except ValueError as exc:  # labels scattered over a body: no hand's size fits them
+            raise MocapInputError(take.source, f"IK validation: the labeled markers make no {layout.name} hand "
+                                               f"({exc}): no hand found (is this a {layout.name} take?)") from None
     solver = calibration.solver(layout)
     first = solver.solve(observed, rate=take.rate)
     outliers = np.nan_to_num(first.residuals, nan=0.0) > 2 * gate
