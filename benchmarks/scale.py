@@ -16,7 +16,8 @@ listed in ``--solve`` are also solved (calibration and IK, ``solve_take``) in th
 The ``label`` CLI end to end (process start, read, label, write) runs on the 10,000-frame one-hand
 take five times, and ``label_take`` on it five times as a fresh process's first take and five times
 in a process that labeled a short take before; the goals take the medians. Writes
-``benchmarks/reports/scale.md`` and a log-log plot ``scale.png`` (time and memory against frames). Issue 36's goals are checked at the end of the report.
+``benchmarks/reports/scale.md`` and a log-log plot ``scale.png`` (time and memory against frames).
+Issue 36's goals are checked at the end of the report.
 """
 
 from __future__ import annotations
