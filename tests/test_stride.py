@@ -96,3 +96,18 @@ def test_rows_asked_for_are_scored_whatever_the_stride():
 @pytest.mark.parametrize("rate, stride", [(120.0, 4), (100.0, 3), (60.0, 2), (30.0, 1), (480.0, 16)])
 def test_stride_follows_the_frame_rate(rate, stride):
     assert stride_for(rate) == stride
+
+
+def test_label_take_scores_every_4th_frame_at_120_hz_and_labels_as_with_every_frame(han19):
+    from mocap_autolabel.core.pipeline import label_take
+    from mocap_autolabel.core.synth.generate import synthesize
+
+    s = synthesize(han19, 1200, seed=3)
+    assert s.take.rate == 120.0
+    strided, every = label_take(s.take, han19), label_take(s.take, han19, stride=1)
+    assert (strided.info["stride"], every.info["stride"]) == (4, 1)
+    valid = s.take.valid
+    for lab in (strided, every):
+        per = lab.per_sample()
+        assert ((per == np.where(s.labels >= 0, s.labels, -1)) | ~valid).mean() > 0.995
+    assert label_take(s.take, han19, temporal="none").info["stride"] == 1  # per-frame labels need every frame
