@@ -561,7 +561,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
         stride: with ``temporal="vote"``, the labeler scores every ``stride``-th frame of each
             trajectory and the samples between take their neighbours' scores
             (:mod:`.temporal.stride`; 1 scores every frame); default: a frame every 1/30 s
-            (:func:`.temporal.stride.stride_for` the take's rate).
+            (:func:`.temporal.stride.stride_for` the take's rate) with ``set``, every frame with
+            the published methods.
 
     Returns:
         the :class:`Labeling`; ``info`` holds the settings and the time of each stage, and
@@ -653,7 +654,8 @@ def label_take(take: Take, layout: Layout, method: str = "set", temporal: str = 
     if temporal != "vote":
         stride = 1  # the other modes decide frame by frame
     elif stride is None:
-        stride = stride_for(take.rate)
+        # Ours; the published labelers score every frame, as their papers do.
+        stride = stride_for(take.rate) if method == "set" else 1
     times["pack"] = time.perf_counter() - t
 
     say(f"scoring {take.n_frames} frames with {method}")
