@@ -60,15 +60,14 @@ def strided_scores(score: Callable[[np.ndarray, np.ndarray], np.ndarray], batch:
     # frame of the same slot and no segment starts at it.
     same = np.zeros(len(order), dtype=bool)
     same[1:] = (np.diff(ordered) == 1) & ~starts[order[1:]]
-    run = np.cumsum(~same) - 1  # segment piece of each sorted sample
+    first = np.flatnonzero(~same)  # sorted position where each piece begins
+    run = np.cumsum(~same) - 1  # the piece of each sorted sample
     needed = frame % stride == 0
     if every is not None:
         needed |= every
-    base = needed[f_idx[order]]
     # A piece with no sample on a base frame gets its first frame scored.
-    pieces_with = np.zeros(run[-1] + 1 if len(run) else 0, dtype=bool)
-    pieces_with[run[base]] = True
-    first = np.flatnonzero(~same)
+    pieces_with = np.zeros(len(first), dtype=bool)
+    pieces_with[run[needed[f_idx[order]]]] = True
     needed[f_idx[order[first[~pieces_with]]]] = True
     rows = np.flatnonzero(needed)
     part = score(batch.points[rows], batch.mask[rows])
