@@ -88,10 +88,10 @@ def evaluate(name: str, observed: np.ndarray, rate: float, layout, rounds: int, 
         hidden = observed.copy()
         for m, a, b in gaps:
             hidden[a:b, m] = np.nan
-        solved = solver.solve(hidden, rate=rate).markers
+        poses = solver.solve(hidden, rate=rate).poses
         for method in ORDER:
             t = time.perf_counter()
-            out = fill_markers(hidden, rate, method, LONGEST, solved=solved, partners=partners)
+            out = fill_markers(hidden, rate, method, LONGEST, solver=solver, poses=poses, partners=partners)
             seconds = time.perf_counter() - t
             used = {(g.marker, g.start): g.method for g in out.gaps}
             for m, a, b in gaps:
@@ -217,10 +217,12 @@ def _speed_take(layout, stress: bool) -> tuple[Take, HandSolve, int]:
         f, p = np.nonzero(lab >= 0)
         x[f, lab[f, p]] = synth.take.positions[f, p]
     t = time.perf_counter()
-    fit = HandSolver(hand, layout.place(hand)[0]).solve(x, rate=120.0)
+    solver = HandSolver(hand, layout.place(hand)[0])
+    fit = solver.solve(x, rate=120.0)
     seconds = {"solve": time.perf_counter() - t}
     gaps = sum(1 for _, a, b in find_gaps(np.isfinite(x[..., 0])) if a > 0 and b < len(x))
-    return Take(x.astype(np.float32), list(layout.names), 120.0), HandSolve(None, fit, layout, 120.0, 1, seconds), gaps
+    solve = HandSolve(None, fit, layout, 120.0, 1, seconds, solver)
+    return Take(x.astype(np.float32), list(layout.names), 120.0), solve, gaps
 
 
 HARSHER = "beyond the bar: its take holds 3x the gaps of a realistic one"

@@ -135,29 +135,29 @@ def test_hand_fill_without_a_solve_says_so(labeled):
 
 
 def test_a_new_solve_refills_the_gaps_filled_from_the_hand(labeled):
-    """The solve is stood in for by markers of a known track (a real one takes seconds and is tested
-    in test_fill); what is checked is that the hand's fills follow a new solve."""
+    """The solve is one of an uncalibrated hand, of two sizes (a calibration takes seconds and is
+    tested in test_fill); what is checked is that the hand's fills follow a new solve."""
     from mocap_autolabel.blender.fill import fill_scene, filled_keys, refill
     from mocap_autolabel.blender.review import current_take
-    from mocap_autolabel.core.fill import fill_markers
-    from mocap_autolabel.core.hand.ik import Fit
+    from mocap_autolabel.core.hand import HandModel
+    from mocap_autolabel.core.hand.calibrate import detect_side
+    from mocap_autolabel.core.hand.ik import HandSolver
     from mocap_autolabel.core.labeling import labeled_take, layout_markers
     from mocap_autolabel.core.pipeline import HandSolve
 
     bpy, coll = labeled
     layout = load_layout("han19")
     observed = layout_markers(labeled_take(current_take(coll), state(coll).labeling), layout)
-    track = np.nan_to_num(fill_markers(observed, 120.0, "spline", max_gap=100.0).positions)
 
-    def solve(wobble: float) -> list:
-        markers = track + wobble * np.sin(np.arange(len(track)) / 7.0)[:, None, None]
-        fit = Fit(np.zeros((len(track), 26)), markers, np.zeros(track.shape[:2]), np.ones(len(track), dtype=bool))
-        return [("", HandSolve(None, fit, layout, 120.0, 1, {}))]
+    def solve(scale: float) -> list:
+        hand = HandModel(side=detect_side(observed, layout), length=0.19 * scale, breadth=0.085 * scale)
+        solver = HandSolver(hand, layout.place(hand)[0])
+        return [("", HandSolve(None, solver.solve(observed, rate=120.0), layout, 120.0, 1, {}, solver))]
 
-    report = fill_scene(coll, "hand", 1.0, solves=solve(0.0))
+    report = fill_scene(coll, "hand", 1.0, solves=solve(1.0))
     assert report["filled"] > 0 and set(report["methods"]) == {"hand"}
     _, _, before = filled_keys(coll, len(layout))
-    again = refill(coll, solve(0.01))  # another solve: other fills of the same gaps
+    again = refill(coll, solve(1.1))  # another solve: other fills of the same gaps
     _, _, after = filled_keys(coll, len(layout))
     assert again["filled"] == report["filled"] and before.shape == after.shape
     assert np.abs(after - before).max() > 1e-4

@@ -17,7 +17,7 @@ import numpy as np
 
 from .errors import MocapInputError
 from .hand.calibrate import Calibration, calibrate
-from .hand.ik import GATE, MIN_MARKERS, Fit
+from .hand.ik import GATE, MIN_MARKERS, Fit, HandSolver
 from .hands import (
     HandNaming,
     Hands,
@@ -1152,14 +1152,22 @@ class HandSolve:
         layout: the marker layout.
         rate: frames per second; first_frame: the take's first frame number.
         seconds: wall time of each stage.
+        hand_solver: the solver the fit came from; None: the calibration's (:meth:`solver`).
     """
 
-    calibration: Calibration
+    calibration: Calibration | None
     fit: Fit
     layout: Layout
     rate: float
     first_frame: int
     seconds: dict
+    hand_solver: HandSolver | None = None
+
+    def solver(self) -> HandSolver:
+        """The calibrated hand and its markers, as solved."""
+        if self.hand_solver is None:
+            self.hand_solver = self.calibration.solver(self.layout)
+        return self.hand_solver
 
     def report(self) -> dict:
         """Per-frame and overall marker RMS in millimetres, per-marker RMS, calibration, timings."""
@@ -1231,11 +1239,12 @@ def solve_take(take: Take, layout: Layout, calibration: Calibration | None = Non
     start = time.perf_counter()
     share0 = CALIBRATE_SHARE if seconds["calibrate"] > 0.05 else 0.0  # where the frames' share starts
     say("solving frames", share0)
-    fit = calibration.solver(layout).solve(
+    solver = calibration.solver(layout)
+    fit = solver.solve(
         observed, rate=take.rate, smooth_hz=smooth_hz,
         progress=lambda done: say(f"solving frames ({100 * done:.0f} %)", share0 + (1 - share0) * done))
     seconds["solve"] = round(time.perf_counter() - start, 4)
-    return HandSolve(calibration, fit, layout, float(take.rate), int(take.first_frame), seconds)
+    return HandSolve(calibration, fit, layout, float(take.rate), int(take.first_frame), seconds, solver)
 
 
 def solve_hands(take: Take, layout: Layout, naming: HandNaming | None = None,
