@@ -189,7 +189,7 @@ def bars(stats: dict) -> list[str]:
         over, count = stats[method, "over"]
         strict, largest = stats[method, "strict"]
         lines.append(f"- {method}: largest step at a gap's end beyond the marker's own steps there "
-                     f"{stats[method, 'jump']:.2f} mm; {over} of {count} gaps at 0.5 mm or more "
+                     f"{stats[method, 'jump']:.3f} mm; {over} of {count} gaps at 0.5 mm or more "
                      f"(bar < 0.5 for every fill: {'met' if over == 0 else 'NOT met'}); against its one true "
                      f"step at that frame alone: {strict} of {count} at 0.5 mm or more, largest {largest:.2f} mm")
     lines.append("")

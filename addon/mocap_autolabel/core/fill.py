@@ -276,17 +276,19 @@ class HandFill(_Model):
     def _prior(self, m: int, start: int, stop: int, leave_out: np.ndarray | None) -> tuple | None:
         """The joint angles' mean ``(20,)`` and precision ``(20, 20)`` near the gap, or None."""
         w = int(POSE_WINDOW * self.rate)
-        near = np.r_[max(0, start - w):start, stop:min(len(self.x), stop + w)]
-        near = near[self.valid[near, m] & self.solved[near]]
+        lo, hi = max(0, start - w), min(len(self.x), stop + w)
+        ok = self.valid[lo:hi, m] & self.solved[lo:hi]
         if leave_out is not None:
-            near = near[~np.isin(near, leave_out)]
+            ok[leave_out[(leave_out >= lo) & (leave_out < hi)] - lo] = False
+        near = lo + np.flatnonzero(ok)  # the gap's frames are not seen
         if len(near) > POSE_FRAMES:
             near = near[np.linspace(0, len(near) - 1, POSE_FRAMES).round().astype(int)]
         if len(near) < MIN_LEARN:
             return None
         angles = self.poses[near, 6:]
-        cov = np.cov(angles, rowvar=False) + PRIOR_FLOOR ** 2 * np.eye(angles.shape[1])
-        return angles.mean(axis=0), PRIOR_SIGMA ** 2 * np.linalg.inv(cov)
+        mean = angles.mean(axis=0)
+        cov = (angles - mean).T @ (angles - mean) / (len(near) - 1) + PRIOR_FLOOR ** 2 * np.eye(angles.shape[1])
+        return mean, PRIOR_SIGMA ** 2 * np.linalg.inv(cov)
 
     def prepare(self, gaps: list[tuple[int, int, int]]) -> None:
         """Solve, in one batch, the frames that the fills of ``gaps`` ``(m, start, stop)`` and their

@@ -9,8 +9,8 @@ from .review import _not_a_take, _present, reviewed_take
 
 _METHODS = [
     ("auto", "Auto", "Per gap, the method with the lowest expected error: hand (where solved), pose or spline"),
-    ("hand", "Hand", "The calibrated, solved hand's marker, blended to meet the samples at both ends (Solve Hand "
-                     "first)"),
+    ("hand", "Hand", "The calibrated hand fitted again without the marker, its unseen joint angles following the "
+                     "others as they did near the gap; blended to meet the samples at both ends (Solve Hand first)"),
     ("pose", "Pose", "Read off the hand's other markers: a linear model of it from them, in the hand's own frame, "
                      "learned within 5 s of the gap"),
     ("rigid", "Rigid", "Carried by the markers that move rigidly with it (its rigid partners and the palm)"),
