@@ -280,9 +280,7 @@ class HandFill(_Model):
         ok = self.valid[lo:hi, m] & self.solved[lo:hi]
         if leave_out is not None:
             ok[leave_out[(leave_out >= lo) & (leave_out < hi)] - lo] = False
-        near = lo + np.flatnonzero(ok)  # the gap's frames are not seen
-        if len(near) > POSE_FRAMES:
-            near = near[np.linspace(0, len(near) - 1, POSE_FRAMES).round().astype(int)]
+        near = _evenly(lo + np.flatnonzero(ok), POSE_FRAMES)  # the gap's frames are not seen
         if len(near) < MIN_LEARN:
             return None
         angles = self.poses[near, 6:]
@@ -296,7 +294,7 @@ class HandFill(_Model):
         asks = []
         for m, start, stop in gaps:
             if self.available(m)[start:stop].all():
-                around, windows = _plan(self, m, self.valid[:, m], start, stop, self.rate)
+                around, _, _, windows = _plan(self, m, self.valid[:, m], start, stop, self.rate)
                 asks.append((m, start, stop, around, False))
                 if len(windows):
                     asks.append((m, start, stop, np.unique(windows), True))
@@ -356,8 +354,7 @@ class HandFill(_Model):
             lower = np.linalg.cholesky(normal)  # one factor for both steps (5x faster than numpy's solve)
             solve = functools.partial(_cholesky_solve, lower)
         except np.linalg.LinAlgError:  # a frame whose other markers pin too little, in round-off
-            inverse = np.linalg.pinv(normal, hermitian=True)
-            solve = lambda g: (inverse @ g[..., None])[..., 0]  # noqa: E731
+            solve = functools.partial(_matvec, np.linalg.pinv(normal, hermitian=True))
         grad = grad_all[which] - (np.swapaxes(mine, 1, 2) @ off[which, hidden][..., None])[..., 0]
         current, at, step = poses[which], fitted[which, hidden], np.zeros((n, poses.shape[1]))
         use = seen[which]
@@ -381,6 +378,11 @@ class HandFill(_Model):
         if got is None or not np.array_equal(got[0], frames):
             got = self._solve([(m, start, stop, frames, held_out)])[key]
         return got[1]
+
+
+def _matvec(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a (R, n, n) @ b (R, n)`` per row: ``(R, n)``."""
+    return (a @ b[..., None])[..., 0]
 
 
 def _cholesky_solve(lower: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -424,8 +426,7 @@ class RigidFill(_Model):
         ref = every[distance <= span]
         if len(ref) < MIN_REFERENCE:
             ref = every[np.argsort(distance, kind="stable")[:2 * span]]
-        if len(ref) > MAX_REFERENCE:
-            ref = ref[np.linspace(0, len(ref) - 1, MAX_REFERENCE).round().astype(int)]
+        ref = _evenly(ref, MAX_REFERENCE)
         shape = self.x[ref[0], p]
         rot, t = kabsch(shape, self.x[ref][:, p], np.ones((len(ref), len(p))))
         template = np.einsum("fji,fj->fi", rot, self.x[ref, m] - t).mean(axis=0)  # R^T (x - t)
@@ -538,9 +539,8 @@ class PoseFill(_Model):
         cols = np.flatnonzero(gap_seen & (valid[near].mean(axis=0) > 0.5)) if len(near) else []
         gap = None
         if len(cols) >= MIN_PARTNERS:
-            learn = near[valid[near][:, cols].all(axis=1)]
-            if len(learn) > POSE_FRAMES:  # neighbouring frames teach little more than one of them
-                learn = learn[np.linspace(0, len(learn) - 1, POSE_FRAMES).round().astype(int)]
+            # neighbouring frames teach little more than one of them
+            learn = _evenly(near[valid[near][:, cols].all(axis=1)], POSE_FRAMES)
             if len(learn) >= MIN_LEARN:
                 shape = self.x[learn][:, cols].mean(axis=0)
                 rot, t, local = self._in_hand(shape, learn, cols)
@@ -651,12 +651,15 @@ def _tests(ok: np.ndarray, start: int, stop: int, pad: int, span: int, most: int
     n = stop - start
     cs = np.concatenate([[0], np.cumsum(ok)])
     c = np.arange(max(pad, start - span), min(len(ok) - n - pad, stop + span) + 1)
-    c = c[cs[c + n + pad] - cs[c - pad] == n + 2 * pad]
-    if len(c) > most:
-        c = c[np.linspace(0, len(c) - 1, most).round().astype(int)]
-    return c
+    return _evenly(c[cs[c + n + pad] - cs[c - pad] == n + 2 * pad], most)
 
 
+def _evenly(frames: np.ndarray, most: int) -> np.ndarray:
+    """At most ``most`` of ``frames``, evenly spread, the first and last kept (the nearest to even
+    steps: :func:`.hands._spread`'s twin rounds down, and its picks are the labeler's)."""
+    if len(frames) <= most:
+        return frames
+    return frames[np.linspace(0, len(frames) - 1, most).round().astype(int)]
 
 
 def _test_points(n: int, most: int = TEST_POINTS) -> np.ndarray:
@@ -734,15 +737,17 @@ def _quadratic_fit(window: int) -> np.ndarray:
 
 
 def _plan(model: _Model, m: int, valid: np.ndarray, start: int, stop: int,
-          rate: float) -> tuple[np.ndarray, np.ndarray]:
+          rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The frames a model's fill of the gap ``[start, stop)`` of marker ``m`` (seen where ``valid
-    (F,)``) asks it for: the gap and :data:`SLOPE_SAMPLES` frames each side; and its test windows
-    (their frames, each window's first frame before its gap and the last after it, in order)."""
+    (F,)``) asks it for: ``around``, the gap and :data:`SLOPE_SAMPLES` frames each side; and its
+    test windows: their first frames inside ``c``, the points measured in each ``inside`` (0-based
+    in the gap), and ``windows``, every window's frames in order (the one before its gap, the
+    points, the one after it)."""
     n, k = stop - start, SLOPE_SAMPLES
     around = np.clip(np.arange(start - k, stop + k), 0, len(valid) - 1)
     c = _tests(valid & model.available(m), start, stop, 1, max(int(NEAR * rate), 2 * n), model.tests)
     inside = _test_points(n, model.test_points)
-    return around, (c[:, None] + np.concatenate([[-1], inside, [n]])).ravel()
+    return around, c, inside, (c[:, None] + np.concatenate([[-1], inside, [n]])).ravel()
 
 
 def _model_fill(model: _Model, m: int, x: np.ndarray, valid: np.ndarray, start: int, stop: int,
@@ -758,9 +763,7 @@ def _model_fill(model: _Model, m: int, x: np.ndarray, valid: np.ndarray, start: 
     ok = model.available(m)
     if not ok[start:stop].all():
         return "no model in every frame of the gap"
-    around, windows = _plan(model, m, valid, start, stop, rate)
-    inside = _test_points(n, model.test_points)
-    c = windows[::len(inside) + 2] + 1
+    around, c, inside, windows = _plan(model, m, valid, start, stop, rate)
     k = SLOPE_SAMPLES
     pred = model.predict(m, around, start, stop)
     tried = np.zeros((0, 3))
@@ -818,7 +821,6 @@ def fill_markers(markers: np.ndarray, rate: float, method: str = "auto", max_gap
     out = markers.copy()
     filled = np.zeros((n_f, n_m), dtype=bool)
     error = np.full((n_f, n_m), np.nan)
-    longest = int(np.floor(max_gap * rate + 1e-9))
     wanted = PREFERENCE if method == "auto" else (method,)
     models: dict[str, _Model | str] = {
         "hand": HandFill(solver, poses, markers, rate) if solver is not None and poses is not None else "no hand solve",
@@ -827,17 +829,13 @@ def fill_markers(markers: np.ndarray, rate: float, method: str = "auto", max_gap
     found = find_gaps(valid)
     hand = models["hand"]
     if "hand" in wanted and isinstance(hand, HandFill):
-        hand.prepare([(m, a, b) for m, a, b in found if 0 < a and b < n_f and b - a <= longest])
+        hand.prepare([(m, a, b) for m, a, b in found if not _left_open(a, b, n_f, rate, max_gap)])
     gaps = []
     for m, start, stop in found:
         gap = Gap(m, names[m], start, stop)
         gaps.append(gap)
-        if start == 0 or stop == n_f:
-            gap.reason = ("never seen" if start == 0 and stop == n_f else
-                          "at the start of the take" if start == 0 else "at the end of the take")
-            continue
-        if stop - start > longest:
-            gap.reason = f"longer than max_gap ({(stop - start) / rate:.2f} s > {max_gap:g} s)"
+        gap.reason = _left_open(start, stop, n_f, rate, max_gap)
+        if gap.reason:
             continue
         x = markers[:, m]
         best, why = None, []
@@ -867,6 +865,17 @@ def fill_markers(markers: np.ndarray, rate: float, method: str = "auto", max_gap
         error[start:stop, m] = err
         gap.error, gap.max_error = float(err.mean()), float(err.max())
     return Filled(out, filled, error, gaps)
+
+
+def _left_open(start: int, stop: int, frames: int, rate: float, max_gap: float) -> str:
+    """Why the gap ``[start, stop)`` of a take of ``frames`` frames is left open whatever the
+    method ("" when a method may fill it)."""
+    if start == 0 or stop == frames:
+        return ("never seen" if start == 0 and stop == frames else
+                "at the start of the take" if start == 0 else "at the end of the take")
+    if stop - start > int(np.floor(max_gap * rate + 1e-9)):
+        return f"longer than max_gap ({(stop - start) / rate:.2f} s > {max_gap:g} s)"
+    return ""
 
 
 def layout_partners(layout: Layout) -> list[np.ndarray]:
