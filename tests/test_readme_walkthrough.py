@@ -176,7 +176,7 @@ def test_the_readme_walkthrough_step_by_step_on_the_demo_take(empty_scene, bpy_m
     assert _walk(bpy, previous=True) == expected[::-1]
 
     # --- 6. Fix: each edit is one undo step and one correction stored on the take.
-    from mocap_autolabel.operators import review as review_ops
+    from mocap_autolabel.operators import corrections as review_ops
 
     for name in FIX_OPERATORS:
         assert "UNDO" in getattr(review_ops, f"MOCAPAL_OT_{name}").bl_options, name

@@ -87,7 +87,7 @@ def test_a_hand_with_more_markers_than_the_layout_is_not_two_hands(han19, monkey
     assert found.count == 1 and found.info["apart_share"] < 0.1
     # Were the groups taken for two hands, the labels would say otherwise: two hands must explain
     # the take better than one.
-    import mocap_autolabel.core.hands as hands
+    import mocap_autolabel.core.hands.tracking as hands
 
     monkeypatch.setattr(hands, "APART", 0.0)
     assert find_hands(take, glove13).count == 2

@@ -11,7 +11,6 @@ Only the standard library at import time: the work happens in :func:`process_tak
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import errno
@@ -23,10 +22,11 @@ import os
 import sys
 import time
 import tomllib
-from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
+
+from .worker_env import environ, thread_caps
 
 TAKE_EXTENSIONS = (".c3d", ".trc", ".tsv")
 
@@ -494,29 +494,6 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
 
 #: Times a take is started in a pool whose worker process died before the take is reported as failed.
 POOL_TRIES = 3
-
-
-def thread_caps(workers: int, threads: int | None = None) -> dict[str, str]:
-    """Environment variables that give each of ``workers`` processes sharing this machine's cores
-    ``threads`` threads (default: its share) for onnxruntime, OpenMP and OpenBLAS; read as those
-    start, so set before a worker process starts."""
-    n = str(threads or max(1, (os.cpu_count() or 1) // workers))
-    return dict.fromkeys(("MOCAP_AUTOLABEL_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"), n)
-
-
-@contextlib.contextmanager
-def environ(env: dict[str, str]) -> Iterator[None]:
-    """``env`` in ``os.environ`` for a while (a process started meanwhile inherits it)."""
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
 
 
 def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings, bar: Progress) -> list[dict]:

@@ -17,6 +17,8 @@ import os
 import re
 from collections.abc import Callable, Iterator
 
+from .worker_env import environ, thread_caps
+
 #: Tries per take for a task that raised (a worker that died is rescheduled by Dask on its own).
 TRIES = 3
 
@@ -52,8 +54,6 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
     if importlib.util.find_spec("distributed") is None:
         raise FarmError(MISSING)
     if kind == "local":
-        from .batch import environ, thread_caps
-
         env = thread_caps(int(where), threads_per_worker)
         with environ(env):  # the workers' thread caps, read as numpy and onnxruntime load
             _start_forkserver()  # it imports while this process imports Dask

@@ -68,8 +68,8 @@ def export_labeled_c3d(take_coll: bpy.types.Collection, path: str) -> None:
     from ..core.labeling import labeled_take
     from ..core.take import UNIT_SCALE
     from .fill import filled_keys
-    from .review import current_take, load_state
     from .scene import file_frames
+    from .takes import current_take, load_state
 
     take = file_frames(take_coll, current_take(take_coll))
     units = take.source_units if take.source_units in UNIT_SCALE else "mm"
@@ -133,8 +133,9 @@ def write_review_scene(take, layout_ref: str, labeling, blend: str, method: str 
     from ..core.layout import load_layout
     from ..core.review import Review
     from .armature import build_solved_hand, solved_hand_collection
-    from .review import ReviewState, commit, write_labeling
+    from .review import commit, write_labeling
     from .scene import ImportOptions, build_take
+    from .takes import ReviewState
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene

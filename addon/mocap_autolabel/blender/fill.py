@@ -27,17 +27,9 @@ from ..core.fill import fill_gaps
 from ..core.labeling import labeled_take
 from ..core.review import marker_classes
 from . import animio
-from .review import (
-    current_take,
-    finger_of,
-    first_frame,
-    key_sure,
-    key_type_values,
-    labeled_object,
-    load_state,
-    state_layout,
-)
+from .markers import finger_of, key_type_values, labeled_object
 from .scene import key_track
+from .takes import current_take, first_frame, key_sure, load_state, state_layout
 
 #: The keyframe type of a filled sample.
 FILL_KEY = "GENERATED"

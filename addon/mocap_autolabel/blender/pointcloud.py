@@ -19,6 +19,7 @@ import bpy
 import numpy as np
 
 from ..core.take import Take
+from .names import free_name
 
 #: Object property that marks a take's raw point cloud (its value: the number of columns S).
 CLOUD = "mocap_cloud"
@@ -40,8 +41,6 @@ def build_cloud(take: Take, slots: np.ndarray, collection: bpy.types.Collection,
                 first: int) -> bpy.types.Object:
     """The point-cloud object of ``take``'s ``slots`` (positions times ``scale``), sample 0 at
     Blender frame ``first``, linked to ``collection``."""
-    from .scene import free_name
-
     slots = np.asarray(slots, dtype=np.int64)
     n_f, n_s = take.n_frames, len(slots)
     if n_s == take.n_points and (n_s == 0 or (slots == np.arange(n_s)).all()):

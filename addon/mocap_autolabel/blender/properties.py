@@ -1,9 +1,10 @@
-"""Settings of the review in the scene (``scene.mocap_autolabel``), its uncertain-segment list and
+"""Settings of the review in the scene (``scene.mocap_autolabel``), with its uncertain-segment list and
 its list of corrections.
 
-The lists are derived from the take's stored labeling and review (``review.py``) and rebuilt
-after every change (and when Confident at changes); they live in the scene so that the panel's
-UILists can show them and undo restores them.
+The lists are derived from the take's stored labeling and review (``takes.py``) and rebuilt
+after every change (and when Confident at changes) by ``lists.py``; they live in the scene so that the
+panel's UILists can show them and undo restores them. The settings' updates rewrite the take's keys
+(``review.recolor``): this module sits above ``review.py``, which never imports it.
 """
 
 from __future__ import annotations
@@ -20,11 +21,10 @@ from bpy.props import (
 )
 
 from ..core.layout import DEFAULT_LAYOUT, builtin_layouts
-from ..core.review import SURE, uncertain_segments
-
-#: How many uncertain segments the list holds at most (worst first).
-LIST_LIMIT = 1000
-
+from ..core.review import SURE
+from .lists import refresh_uncertain
+from .review import recolor
+from .takes import has_review, load_state, take_collection
 
 TEMPORAL_ITEMS = [("vote", "Trajectory voting", "Decide per tracklet (default)"),
                   ("viterbi", "N-best Viterbi", "Alexanderson's N-best hypotheses with a Kalman filter"),
@@ -65,19 +65,17 @@ def is_take(_self, coll) -> bool:
 
 
 def _take_changed(self, context):
-    from . import review
-
     coll = self.take
     if coll is not None and not is_take(self, coll):
         # The field only offers takes, but Python can assign anything: a take's own child collection
         # stands for its take, any other collection for none (labeling it would build a take inside it).
-        self.take = review.take_collection(coll)  # calls this update again
+        self.take = take_collection(coll)  # calls this update again
         return
     self["walk_slot"] = -1
     _follow_layout(self, coll)
-    if coll is not None and review.has_review(coll):
-        review.recolor(self.id_data, coll)
-        refresh_uncertain(self.id_data, coll, review.load_state(coll).labeling)
+    if coll is not None and has_review(coll):
+        recolor(self.id_data, coll)
+        refresh_uncertain(self.id_data, coll, load_state(coll).labeling)
     else:
         self.uncertain.clear()
         self.corrections.clear()
@@ -109,11 +107,9 @@ def set_layout(settings, layout: str) -> None:
 def _follow_layout(self, coll) -> None:
     """The Take field changed: the Layout field shows the new take's layout (the one chosen for it, else
     the one it was labeled with), so that Label does not label it with another take's layout."""
-    from . import review
-
     if coll is None:
         return
-    layout = coll.get(LAYOUT_CHOICE) or (review.load_state(coll).layout if review.has_review(coll) else None)
+    layout = coll.get(LAYOUT_CHOICE) or (load_state(coll).layout if has_review(coll) else None)
     if layout in builtin_layouts():
         set_layout(self, layout)
 
@@ -129,12 +125,10 @@ def _layout_changed(self, context):
 
 def _sure_changed(self, context):
     """Confident at moved: the list, the counts, the walk and the key colours follow it."""
-    from . import review
-
     coll = self.take
-    if coll is not None and review.has_review(coll):
-        review.recolor(self.id_data, coll)
-        refresh_uncertain(self.id_data, coll, review.load_state(coll).labeling)
+    if coll is not None and has_review(coll):
+        recolor(self.id_data, coll)
+        refresh_uncertain(self.id_data, coll, load_state(coll).labeling)
 
 
 class MOCAPAL_PG_uncertain(bpy.types.PropertyGroup):
@@ -188,70 +182,10 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     walk_frame: IntProperty(default=0, options={"HIDDEN"})
 
 
-def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling) -> None:
-    """Rebuild the scene's list of uncertain segments (worst first) from a labeling: labeled ones, and
-    unlabeled ones (possible missed markers) under their unlabeled empty's point name (``*N``); and
-    the list of the take's corrections."""
-    from ..core.labeling import unlabeled_point_names
-    from .review import current_take, first_frame
-
-    settings = scene.mocap_autolabel
-    first = first_frame(take_coll)
-    idx = uncertain_segments(labeling, settings.sure)
-    points = unlabeled_point_names(current_take(take_coll).names, labeling.names) \
-        if (labeling.label[idx] < 0).any() else None
-    items = settings.uncertain
-    items.clear()
-    for i in idx[:LIST_LIMIT]:
-        item = items.add()
-        item.label = labeling.names[labeling.label[i]] if labeling.label[i] >= 0 else points[labeling.slot[i]]
-        item.slot = int(labeling.slot[i])
-        item.frame_start = int(labeling.start[i]) + first
-        item.frame_end = int(labeling.stop[i]) - 1 + first
-        item.confidence = float(labeling.confidence[i])
-    settings.uncertain_total = len(idx)
-    from .timeline import mark_bad_frames
-
-    mark_bad_frames(scene, take_coll, labeling, settings.sure)  # the Timeline's overview follows the list
-    # Writing the index directly would jump; the property's raw storage does not call the update.
-    settings["uncertain_index"] = -1
-    refresh_corrections(scene, take_coll, labeling)
-
-
-def refresh_corrections(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling) -> None:
-    """Rebuild the scene's list of the take's corrections: its locked decisions in the order they
-    were made (the list index is the constraint's place, which Delete Correction takes), then its
-    splits."""
-    from ..core.labeling import NULL
-    from ..core.review import describe
-    from .review import first_frame, load_state, trajectory_names
-
-    settings = scene.mocap_autolabel
-    review = load_state(take_coll).review
-    # Only a take with corrections needs its point names (reading them back from the scene costs).
-    names = trajectory_names(take_coll) if review.constraints or review.splits else []
-    first = first_frame(take_coll)
-    items = settings.corrections
-    items.clear()
-    for c in review.constraints:
-        item = items.add()
-        item.kind = "ghost" if c.label == NULL else "label"
-        item.text = describe(c, labeling.names, names, first)
-        item.slot, item.frame_start, item.frame_end = c.slot, c.start + first, c.stop - 1 + first
-    for slot, frame in review.splits:
-        item = items.add()
-        item.kind = "split"
-        item.text = f"split {names[slot]} at frame {frame + first}"
-        item.slot, item.frame_start, item.frame_end = slot, frame + first, frame + first
-    if settings.corrections_index >= len(items):
-        settings.corrections_index = len(items) - 1
-
-
 @bpy.app.handlers.persistent
 def on_load(*_args) -> None:
     """After a file loads: drop the session caches, and give every scene without a reviewed take the
     first labeled take it holds (a .blend written by the command line has none set)."""
-    from .review import has_review
     from .session import forget_all
 
     forget_all()

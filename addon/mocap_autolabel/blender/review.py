@@ -1,4 +1,4 @@
-"""A labeled take in the scene: labeled and unlabeled empties keyed by confidence, and the review state.
+"""A labeled take in the scene: labeled and unlabeled empties keyed by confidence, and the labeling run.
 
 The take collection made by the importer (``scene.build_take``) holds the whole review:
 
@@ -13,20 +13,24 @@ The take collection made by the importer (``scene.build_take``) holds the whole 
   constraints and splits) and ``mocap_settings`` (layout, method...): saved with the file and
   restored by undo together with the keys.
 
+Finding the take, reading it back and the stored state are :mod:`.takes`; the empties' colours and
+lookups :mod:`.markers`; the panel's lists :mod:`.lists`. This module writes labels into the scene
+(:func:`write_labeling`), runs a labeling of a scene's take (:class:`LabelRequest`) and stores its
+result (:func:`finish_label`, :func:`edit`). The names of :mod:`.takes` and :mod:`.markers` stay
+importable from here.
+
 Nothing here decides labels: that is ``core.pipeline`` and ``core.review``.
 """
 
 from __future__ import annotations
 
-import json
-import uuid
 from dataclasses import asdict, dataclass, field
 
 import bpy
 import numpy as np
 
 from ..core.hands import labeling_sides, relabel_plan
-from ..core.labeling import EMPTY, Labeling, unlabeled_point_names
+from ..core.labeling import Labeling, unlabeled_point_names
 from ..core.layout import Layout, load_layout
 from ..core.review import (
     CLASS_NAMES,
@@ -34,54 +38,47 @@ from ..core.review import (
     SURE,
     Review,
     changed_labels,
-    labeling_from_arrays,
-    labeling_to_arrays,
     marker_classes,
     null_classes,
     remap_review,
     uncertain_segments,
 )
 from ..core.take import Take
-from . import animio
-from .pointcloud import CLOUD, is_cloud, read_cloud
-from .scene import free_name, key_track, new_marker
+from .lists import refresh_uncertain
+from .markers import (
+    FINGER_COLOR_SETS,
+    FINGERS,
+    finger_of,
+    key_type_values,
+    labeled_object,  # noqa: F401 (kept importable from here)
+    labeled_objects,
+    null_objects,
+    object_for,  # noqa: F401 (kept importable from here)
+    slot_of,  # noqa: F401 (kept importable from here)
+    theme_color,
+)
+from .names import free_name
+from .pointcloud import is_cloud
+from .scene import key_track, new_marker
+from .takes import (
+    ReviewState,
+    current_take,
+    first_frame,
+    has_review,
+    key_sure,
+    load_state,
+    raw_cloud,  # noqa: F401 (kept importable from here)
+    raw_markers,  # noqa: F401 (kept importable from here)
+    read_take,  # noqa: F401 (kept importable from here)
+    sample_index,  # noqa: F401 (kept importable from here)
+    scene_sure,
+    state_layout,
+    store_state,
+    take_collection,  # noqa: F401 (kept importable from here)
+    trajectory_names,  # noqa: F401 (kept importable from here)
+)
 
-#: Channel-group colour set of each digit (Blender's bone colour sets: red, orange, green,
-#: blue, violet, grey); the viewport overlay draws the same colours.
-FINGER_COLOR_SETS = {"thumb": "THEME01", "index": "THEME02", "middle": "THEME03", "ring": "THEME04",
-                     "little": "THEME06", "palm": "THEME13"}
-FINGERS = tuple(FINGER_COLOR_SETS)
-
-
-def finger_of(layout: Layout, label: int) -> str:
-    """The digit a layout marker sits on (``thumb`` ... ``little``), or ``palm``."""
-    bone = layout.markers[label].bone
-    return "palm" if bone == "palm" else bone.split("_")[0]
-
-
-def key_type_values() -> np.ndarray:
-    """int ``(4,)``: the keyframe type enum value of each confidence class."""
-    return np.array([animio.key_type_value(t) for t in KEY_TYPES], dtype=np.int32)
-
-
-# --- finding the take -----------------------------------------------------------------------
-
-def take_collection(obj_or_collection) -> bpy.types.Collection | None:
-    """The imported take collection an object or collection belongs to (or None)."""
-    if obj_or_collection is None:
-        return None
-    if isinstance(obj_or_collection, bpy.types.Collection):
-        colls = [obj_or_collection]
-    else:
-        colls = list(obj_or_collection.users_collection)
-    for coll in colls:
-        if "mocap_source" in coll:
-            return coll
-        owner = coll.get("mocap_take")
-        if owner is not None and "mocap_source" in owner:
-            return owner
-    return None
-
+# --- writing labels into the scene ----------------------------------------------------------
 
 def _child(take_coll: bpy.types.Collection, key: str, name: str) -> bpy.types.Collection:
     coll = take_coll.get(key)
@@ -91,128 +88,6 @@ def _child(take_coll: bpy.types.Collection, key: str, name: str) -> bpy.types.Co
         coll["mocap_take"] = take_coll
         take_coll[key] = coll
     return coll
-
-
-def _raw_objects(take_coll: bpy.types.Collection) -> list[bpy.types.Object]:
-    raw = take_coll.get("mocap_raw")
-    return list(take_coll.objects) + (list(raw.objects) if raw is not None else [])
-
-
-def raw_markers(take_coll: bpy.types.Collection) -> list[bpy.types.Object]:
-    """The imported (raw) empties of the take, by slot (none for a take imported as a point cloud)."""
-    return sorted((o for o in _raw_objects(take_coll)
-                   if "mocap_slot" in o and "mocap_label" not in o and "mocap_null" not in o),
-                  key=lambda o: o["mocap_slot"])
-
-
-def raw_cloud(take_coll: bpy.types.Collection) -> bpy.types.Object | None:
-    """The take's raw point cloud (:mod:`.pointcloud`), where it was imported as one, else None."""
-    return next((o for o in _raw_objects(take_coll) if is_cloud(o)), None)
-
-
-def first_frame(take_coll: bpy.types.Collection) -> int:
-    """The Blender frame of the take's sample 0."""
-    return int(take_coll.get("mocap_first", 1))
-
-
-def read_take(take_coll: bpy.types.Collection) -> Take:
-    """The take as the scene holds it, read back from the raw empties' keys (metres), or from the
-    raw point cloud's attributes for a take imported as one.
-
-    Slot numbers are the importer's, so labels and constraints keep meaning the same samples.
-    """
-    scale = float(take_coll.get("mocap_scale", 1.0))
-    first = first_frame(take_coll)
-    cloud = raw_cloud(take_coll)
-    if cloud is not None:
-        positions, names = read_cloud(cloud, scale)
-        return Take(positions=positions, names=names, rate=float(take_coll.get("mocap_rate", 100.0)),
-                    first_frame=first, source=take_coll.get("mocap_source", ""),
-                    source_units=str(take_coll.get("mocap_units", "mm")))
-    objs = raw_markers(take_coll)
-    keyed = []
-    last = -1
-    for obj in objs:
-        curves = [animio.find_fcurve(obj, "location", axis) for axis in range(3)]
-        if any(c is None for c in curves):
-            keyed.append((obj, None, None))
-            continue
-        frames, x = animio.read_keys(curves[0])
-        xyz = np.stack([x, animio.read_keys(curves[1])[1], animio.read_keys(curves[2])[1]], axis=1)
-        idx = np.rint(frames).astype(np.int64) - first
-        keyed.append((obj, idx, xyz))
-        if len(idx):
-            last = max(last, int(idx.max()))
-    n_points = (max(int(o["mocap_slot"]) for o in objs) + 1) if objs else 0
-    positions = np.full((last + 1, n_points, 3), np.nan, dtype=np.float32)
-    names = [f"*{i}" for i in range(n_points)]
-    for obj, idx, xyz in keyed:
-        slot = int(obj["mocap_slot"])
-        names[slot] = obj.get("mocap_point", obj.name)
-        if idx is not None:
-            positions[idx, slot] = xyz / scale
-    return Take(positions=positions, names=names, rate=float(take_coll.get("mocap_rate", 100.0)),
-                first_frame=first, source=take_coll.get("mocap_source", ""),
-                source_units=str(take_coll.get("mocap_units", "mm")))
-
-
-# --- the stored review state ------------------------------------------------------------------
-
-@dataclass
-class ReviewState:
-    """What the take collection stores: the labeling, the corrections and how labels were made."""
-
-    labeling: Labeling
-    review: Review
-    layout: str
-    method: str
-    temporal: str
-    token: str = ""
-
-
-def has_review(take_coll: bpy.types.Collection) -> bool:
-    return take_coll is not None and "mocap_labeling" in take_coll
-
-
-def store_state(take_coll: bpy.types.Collection, state: ReviewState) -> None:
-    """Write the state into the collection's custom properties (a new token marks the change)."""
-    arrays = labeling_to_arrays(state.labeling)
-    take_coll["mocap_labeling"] = {
-        "names": "\n".join(arrays.pop("names")), "n_frames": arrays.pop("n_frames"),
-        "n_points": arrays.pop("n_points"),
-        **{k: np.asarray(v, dtype=np.float64 if k == "confidence" else np.int64).tolist() for k, v in arrays.items()},
-    }
-    rev = state.review.to_arrays()
-    take_coll["mocap_review"] = {k: v.tolist() for k, v in rev.items()}
-    state.token = uuid.uuid4().hex
-    info = {k: v for k, v in state.labeling.info.items() if isinstance(v, (str, int, float, bool, dict, list))}
-    take_coll["mocap_settings"] = {"layout": state.layout, "method": state.method, "temporal": state.temporal,
-                                   "token": state.token, "info": json.dumps(info, default=str)}
-
-
-def load_state(take_coll: bpy.types.Collection) -> ReviewState:
-    """The stored state (raises KeyError when the take was never labeled)."""
-    data = take_coll["mocap_labeling"]
-    settings = take_coll["mocap_settings"]
-    arrays = {k: np.asarray(data[k]) for k in ("slot", "start", "stop", "label", "confidence", "locked")}
-    labeling = labeling_from_arrays({**arrays, "names": str(data["names"]).split("\n"),
-                                     "n_frames": data["n_frames"], "n_points": data["n_points"]},
-                                    info=json.loads(settings.get("info", "{}")))
-    rev = take_coll.get("mocap_review") or {}
-    review = Review.from_arrays(np.asarray(rev.get("constraints", [])), np.asarray(rev.get("splits", [])))
-    return ReviewState(labeling, review, str(settings["layout"]), str(settings["method"]),
-                       str(settings["temporal"]), str(settings.get("token", "")))
-
-
-def state_layout(state: ReviewState) -> Layout:
-    return load_layout(state.layout)
-
-
-# --- writing labels into the scene ----------------------------------------------------------
-
-def _labeled_objects(coll: bpy.types.Collection) -> dict[int, bpy.types.Object]:
-    # all_objects: a two-hand take's labeled empties sit in one child collection per hand
-    return {int(o["mocap_label"]): o for o in coll.all_objects if "mocap_label" in o}
 
 
 #: The child collection of "Labeled" that holds each hand's empties in a two-hand take.
@@ -239,10 +114,6 @@ def _hand_collections(take_coll: bpy.types.Collection, labeled: bpy.types.Collec
             take_coll[key] = coll
         out.append(coll)
     return out
-
-
-def _null_objects(coll: bpy.types.Collection) -> dict[int, bpy.types.Object]:
-    return {int(o["mocap_null"]): o for o in coll.objects if "mocap_null" in o}
 
 
 #: Appended to an imported empty's name when it moves into "Raw" and a label has that name.
@@ -329,7 +200,7 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
     from .fill import forget_fills, keep_fills, restore_fills
 
     kept = keep_fills(take_coll, previous, labeling, todo, take.n_frames)  # markers only recoloured
-    objs = _labeled_objects(labeled)
+    objs = labeled_objects(labeled)
     for label in todo:
         obj = objs.get(label)
         finger = finger_of(layout, label % m)  # label % M: the layout marker, on either hand
@@ -353,7 +224,7 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
         slots = np.flatnonzero((null_class >= 0).any(axis=0))
     else:
         slots = np.flatnonzero((null_classes(previous, previous_sure) != null_class).any(axis=0))
-    nulls = _null_objects(unlabeled)
+    nulls = null_objects(unlabeled)
     point_names = unlabeled_point_names(take.names, labeling.names)
     for slot in slots:
         valid = null_class[:, slot] >= 0
@@ -369,17 +240,6 @@ def write_labeling(take_coll: bpy.types.Collection, take: Take, layout: Layout, 
     return {"labeled": len(todo), "unlabeled": len(slots)}
 
 
-def key_sure(take_coll: bpy.types.Collection) -> float:
-    """The confidence threshold the take's key colours show (the default before any was stored)."""
-    return float(take_coll.get("mocap_sure", SURE))
-
-
-def scene_sure(scene: bpy.types.Scene | None) -> float:
-    """The panel's Confident at (the default where the add-on is not registered: a CLI run)."""
-    settings = getattr(scene, "mocap_autolabel", None) if scene is not None else None
-    return float(settings.sure) if settings is not None else SURE
-
-
 def recolor(scene: bpy.types.Scene, take_coll: bpy.types.Collection) -> int:
     """Rewrite the key types of the markers whose class changes at the scene's Confident at; returns
     how many empties were rewritten (none when the keys already show that threshold)."""
@@ -390,56 +250,6 @@ def recolor(scene: bpy.types.Scene, take_coll: bpy.types.Collection) -> int:
     counts = write_labeling(take_coll, current_take(take_coll), state_layout(state), state.labeling,
                             state.labeling, sure)
     return counts["labeled"] + counts["unlabeled"]
-
-
-def theme_color(finger: str) -> tuple[float, float, float]:
-    """The RGB of a digit's colour set in the current theme."""
-    index = int(FINGER_COLOR_SETS[finger][5:]) - 1
-    return tuple(bpy.context.preferences.themes[0].bone_color_sets[index].normal)
-
-
-# --- what the reviewer points at --------------------------------------------------------------
-
-def sample_index(take_coll: bpy.types.Collection, frame: int) -> int:
-    """The take's sample index (0-based) of a Blender frame."""
-    return int(frame) - first_frame(take_coll)
-
-
-def trajectory_names(take_coll: bpy.types.Collection) -> list[str]:
-    """The name of every point slot as the reviewer knows it: the file's point name, ``*N`` where
-    the file named none (what messages and the Corrections list say instead of a slot number)."""
-    return list(current_take(take_coll).names)
-
-
-def slot_of(obj: bpy.types.Object, labeling: Labeling, index: int) -> int | None:
-    """The point slot an empty shows at sample ``index`` (None where it shows nothing)."""
-    if not 0 <= index < labeling.n_frames:
-        return None
-    if "mocap_label" in obj:
-        per = labeling.per_sample()[index]
-        hit = np.flatnonzero(per == int(obj["mocap_label"]))
-        return int(hit[0]) if len(hit) else None
-    for key in ("mocap_null", "mocap_slot"):
-        if key in obj:
-            slot = int(obj[key])
-            return slot if labeling.per_sample()[index, slot] != EMPTY else None
-    return None
-
-
-def labeled_object(take_coll: bpy.types.Collection, label: int) -> bpy.types.Object | None:
-    """The empty of a layout label in the take's "Labeled" collection (or None)."""
-    coll = take_coll.get("mocap_labeled")
-    return _labeled_objects(coll).get(int(label)) if coll is not None and label >= 0 else None
-
-
-def object_for(take_coll: bpy.types.Collection, labeling: Labeling, segment: int) -> bpy.types.Object | None:
-    """The empty that shows a segment: the labeled marker, or the slot's unlabeled empty."""
-    label = int(labeling.label[segment])
-    if label >= 0:
-        coll = take_coll.get("mocap_labeled")
-        return _labeled_objects(coll).get(label) if coll is not None else None
-    coll = take_coll.get("mocap_unlabeled")
-    return _null_objects(coll).get(int(labeling.slot[segment])) if coll is not None else None
 
 
 def summary(labeling: Labeling, sure: float, first: int = 0) -> dict:
@@ -497,7 +307,7 @@ def overlay_geometry(take_coll: bpy.types.Collection, layout: Layout, classes: n
         ``(u, 3)`` positions to ring, ``ring_colors`` ``(u, 4)``, ``lines`` ``(2 s, 3)`` stick ends.
     """
     coll = take_coll.get("mocap_labeled")
-    objs = _labeled_objects(coll) if coll is not None else {}
+    objs = labeled_objects(coll) if coll is not None else {}
     m = len(layout)
     n_labels = classes.shape[1] if classes.ndim == 2 else m
     ok = 0 <= index < classes.shape[0]
@@ -530,27 +340,7 @@ def overlay_geometry(take_coll: bpy.types.Collection, layout: Layout, classes: n
             "lines": np.array(lines, dtype=np.float32).reshape(-1, 3)}
 
 
-
 # --- labeling a take of the scene: prepared on the main thread, run anywhere, finished on the main thread
-
-def current_take(take_coll: bpy.types.Collection) -> Take:
-    """The take of the scene, read once per session (re-read when its raw empties change)."""
-    from .session import session
-
-    cache = session(take_coll)
-    cloud = raw_cloud(take_coll)
-    objs = raw_markers(take_coll) if cloud is None else [cloud]
-    key = (len(objs), first_frame(take_coll), float(take_coll.get("mocap_scale", 1.0)),
-           sum(len(animio.fcurves_of(o)) for o in objs) if cloud is None
-           else (cloud.name, len(cloud.data.vertices), int(cloud[CLOUD])))
-    if cache.take is None or cache.take_key != key:
-        if not objs:
-            from ..core.errors import MocapInputError
-
-            raise MocapInputError(take_coll.name, "the take has no imported marker empties to label")
-        cache.take, cache.take_key = read_take(take_coll), key
-    return cache.take
-
 
 @dataclass
 class LabelRequest:
@@ -691,8 +481,6 @@ def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, reques
 
 def commit(scene: bpy.types.Scene, take_coll: bpy.types.Collection, state: ReviewState) -> None:
     """Store the state on the take and make it the scene's reviewed take."""
-    from .properties import refresh_uncertain
-
     store_state(take_coll, state)
     settings = getattr(scene, "mocap_autolabel", None)
     if settings is None:  # the add-on is not registered (a CLI run): the panel adopts the take on load

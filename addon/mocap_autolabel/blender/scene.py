@@ -11,6 +11,8 @@ import numpy as np
 
 from ..core.take import Take
 from . import animio
+from .names import free_name
+from .pointcloud import build_cloud
 
 #: Empty display size in metres: about a hand marker's diameter.
 MARKER_DISPLAY_SIZE = 0.008
@@ -51,23 +53,6 @@ def set_scene_timing(scene: bpy.types.Scene, rate: float, first: int, last: int)
     scene.frame_start = first
     scene.frame_end = max(last, first)
     scene.frame_current = first
-
-
-def free_name(wanted: str, datablocks, owner: str, current=None) -> str:
-    """A name for a datablock of a take that clashes with no other: ``wanted`` while it is free in
-    ``datablocks`` (``bpy.data.objects``, ``bpy.data.collections``...), else ``<owner>:<wanted>``.
-
-    Blender names are unique per file and it would append ``.001`` to the second ``IndexTip`` or
-    ``Labeled``: that hides which take an object belongs to, and a script looking for
-    ``IndexTip`` finds the wrong one. The first take in a scene keeps the plain names; a later
-    take whose names are taken gets its collection's name as a prefix (``take2:IndexTip``, the
-    subject-prefix style capture software writes). ``current`` is the datablock being renamed,
-    which may already hold the name.
-    """
-    held = datablocks.get(wanted)
-    if held is None or held == current:
-        return wanted
-    return f"{owner}:{wanted}"
 
 
 def take_collection_name(take: Take) -> str:
@@ -136,8 +121,6 @@ def build_take(take: Take, scene: bpy.types.Scene, options: ImportOptions | None
     collection["mocap_first"] = first  # the Blender frame of positions[0]
     collection["mocap_offset"] = int(options.frame_offset)
     if options.as_point_cloud:
-        from .pointcloud import build_cloud
-
         build_cloud(take, slots, collection, options.scale, first)
     else:
         _key_slots(take, slots, collection, options.scale, np.arange(take.n_frames, dtype=np.float32) + first)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import bpy
 
 from ..core.review import BadRun, bad_runs
+from .takes import first_frame
 
 #: How many runs get a marker (worst first): more would bury the Timeline.
 MARKER_LIMIT = 20
@@ -38,8 +39,6 @@ def clear_bad_frames(scene: bpy.types.Scene, take_coll: bpy.types.Collection) ->
 def mark_bad_frames(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling, sure: float,
                     limit: int = MARKER_LIMIT) -> list[BadRun]:
     """Replace the take's timeline markers by one per worst run (at most ``limit``); returns the runs."""
-    from .review import first_frame
-
     clear_bad_frames(scene, take_coll)
     runs = bad_runs(labeling, sure, limit)
     first = first_frame(take_coll)

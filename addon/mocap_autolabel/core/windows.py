@@ -18,13 +18,16 @@ from dataclasses import replace
 
 import numpy as np
 
+from .cache import RunCache
+from .hands import DEFAULT_NAMING, HandNaming, sided_layout_names, swap_frames
 from .labeling import EMPTY, Labeling
 from .layout import Layout
+from .settings import WINDOW_FRAMES, Corrections, LabelSettings
+from .stages.hands import other_named_points, remembered_hands
 from .take import Take
 
-#: Frames a take may have before it is labeled in windows, and a window's length: the peak memory
-#: of a 30,000-frame window is about 0.5 GB with one hand and 2 GB with two.
-WINDOW_FRAMES = 30_000
+#: ``label(take, settings, corrections, progress)``: a take labeled whole (the pipeline's passes).
+LabelWhole = Callable[[Take, LabelSettings, Corrections, Callable[[str, float], None]], Labeling]
 #: Frames two neighbouring windows share (10 s at 120 Hz); the cut between them lies in the middle
 #: half of the overlap, so that a window sees at least a quarter of it beyond its cut.
 OVERLAP_FRAMES = 1_200
@@ -60,18 +63,21 @@ def _quiet_frame(valid: np.ndarray, lo: int, hi: int) -> int:
     return lo + int(np.argmin(through))
 
 
-def _corrections_in(start: int, stop: int, constraints, splits, hand_swaps) -> dict:
-    """``label_take`` keywords: the constraints, splits and hands' swaps that fall in frames
+def _corrections_in(start: int, stop: int, corrections: Corrections) -> Corrections:
+    """The constraints, splits, hands' swaps and excluded samples that fall in frames
     ``[start, stop)``, in that stretch's own frames."""
     clipped = []
-    for c in constraints:
+    for c in corrections.constraints:
         a, b = max(c.start, start), min(c.stop, stop)
         if a < b:
             clipped.append(replace(c, start=a - start, stop=b - start))
-    return {"constraints": clipped,
-            "splits": [(slot, frame - start) for slot, frame in splits if start <= frame < stop],
-            "hand_swaps": None if hand_swaps is None else
-            [[max(a, start) - start, min(b, stop) - start] for a, b in hand_swaps if max(a, start) < min(b, stop)]}
+    hand_swaps = corrections.hand_swaps
+    return Corrections(
+        constraints=clipped,
+        splits=[(slot, frame - start) for slot, frame in corrections.splits if start <= frame < stop],
+        hand_swaps=None if hand_swaps is None else
+        [[max(a, start) - start, min(b, stop) - start] for a, b in hand_swaps if max(a, start) < min(b, stop)],
+        exclude=None if corrections.exclude is None else corrections.exclude[start:stop])
 
 
 def _window_take(take: Take, start: int, stop: int) -> Take:
@@ -82,51 +88,46 @@ def _window_take(take: Take, start: int, stop: int) -> Take:
                    first_frame=take.first_frame + start, warnings=[])
 
 
-def label_in_windows(label: Callable[..., Labeling], take: Take, layout: Layout, window: int = WINDOW_FRAMES,
-                     overlap: int = OVERLAP_FRAMES, constraints=(), splits=(), exclude: np.ndarray | None = None,
-                     hand_swaps=None, naming=None, sides=None, progress: Callable[[str], None] | None = None,
-                     done: Callable[[float], None] | None = None, **options) -> Labeling:
-    """Label ``take`` window by window with ``label`` (:func:`.pipeline.label_take`, given the
-    other ``options``) and join the windows' labelings.
+def label_in_windows(label: LabelWhole, take: Take, layout: Layout, settings: LabelSettings,
+                     corrections: Corrections, progress: Callable[[str, float], None],
+                     overlap: int = OVERLAP_FRAMES) -> Labeling:
+    """Label ``take`` window by window of ``settings.window`` frames with ``label`` and join the
+    windows' labelings.
 
     Constraints, a reviewer's splits, excluded samples and the hands' swaps are handed to the
     windows they fall in. Where some window holds two hands, every window is named by side (a
     window in which one hand is seen names it by its side), and the labels are those of two hands.
-    ``sides``: the sides of the hands in each window's order (a list per window, as the joined
-    ``info["hands"]["by_hand_order"]`` gives them), or one list for every window.
+    ``settings.sides``: the sides of the hands in each window's order (a list per window, as the
+    joined ``info["hands"]["by_hand_order"]`` gives them), or one list for every window.
 
     Returns:
         one :class:`.labeling.Labeling` of the whole take; ``info`` is the first window's, with
         ``windows`` (each window's frames, cut, hands and seconds), the seconds of each stage
         summed, and the hands' swaps and props of every window.
     """
-    from .hands import DEFAULT_NAMING, HandNaming, sided_layout_names
-
-    bounds = window_bounds(take.n_frames, window, overlap)
+    bounds = window_bounds(take.n_frames, settings.window, overlap)
     cuts = _cuts(take.valid, bounds)
-    say = progress or (lambda _msg: None)
+    sides = settings.sides
     per_window = sides is not None and len(sides) > 0 and not isinstance(sides[0], str)
 
     def one(i: int, naming) -> Labeling:
         start, stop = bounds[i]
-        say(f"window {i + 1} of {len(bounds)}: frames {start}-{stop - 1}")
-        inner_done = None if done is None else (lambda share, i=i: done((i + share) / len(bounds)))
-        return label(_window_take(take, start, stop), layout,
-                     **_corrections_in(start, stop, constraints, splits, hand_swaps),
-                     exclude=None if exclude is None else exclude[start:stop],
-                     naming=naming, sides=sides[i] if per_window else sides, progress=progress, done=inner_done,
-                     window=None, **options)
+        progress(f"window {i + 1} of {len(bounds)}: frames {start}-{stop - 1}", i / len(bounds))
+        window_settings = settings.but(naming=naming, sides=sides[i] if per_window else sides, window=None)
+        return label(_window_take(take, start, stop), window_settings, _corrections_in(start, stop, corrections),
+                     lambda message, share: progress(message, (i + share) / len(bounds)))
 
+    naming = settings.naming
     parts: list[Labeling] = []
     for i in range(len(bounds)):
         part = one(i, naming)
         if naming is None and part.info.get("hands", {}).get("count") == 2:
-            naming = HandNaming(DEFAULT_NAMING)
+            naming = DEFAULT_NAMING
             parts = [one(j, naming) for j in range(i)]  # windows of one hand before: named by side
         parts.append(part)
     names = parts[0].names
     if any(p.names != names for p in parts):  # two hands somewhere, or one hand seen as either side
-        names = sided_layout_names(layout, ["left", "right"], HandNaming(naming) if isinstance(naming, str) else naming)
+        names = sided_layout_names(layout, ["left", "right"], None if naming is None else HandNaming(naming))
     return _join(take, parts, bounds, cuts, names)
 
 
@@ -240,9 +241,9 @@ def changed_frames(previous: Labeling, constraints, splits) -> list[tuple[int, i
     return sorted(ranges)
 
 
-def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, previous: Labeling,
-                   constraints=(), splits=(), naming=None, hand_swaps=None,
-                   progress: Callable[[str], None] | None = None, **options) -> Labeling | None:
+def relabel_around(label: LabelWhole, take: Take, layout: Layout, previous: Labeling, settings: LabelSettings,
+                   corrections: Corrections, progress: Callable[[str, float], None],
+                   cache: RunCache | None = None) -> Labeling | None:
     """A re-solve that labels again only the frames around what a reviewer changed since
     ``previous`` (:func:`changed_frames`, each range with :data:`RESOLVE_PAD_S` seconds on either
     side) and keeps ``previous`` elsewhere: its time is that of the changed stretch, whatever the
@@ -251,7 +252,7 @@ def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, p
     The stretch is labeled as a take of its own with the corrections that fall in it, each hand
     with the side ``previous`` gave most of its markers there, and joined to ``previous`` at a cut
     in the outer half of each margin where the fewest trajectories run through. A trajectory that
-    runs through a cut keeps ``previous``'s label outside it. ``options`` go to ``label``.
+    runs through a cut keeps ``previous``'s label outside it.
 
     Returns:
         the labeling, or None where the take must be labeled whole: nothing changed, the changes
@@ -262,7 +263,7 @@ def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, p
     t0 = time.perf_counter()
     if (previous.n_frames, previous.n_points) != (take.n_frames, take.n_points):
         return None
-    ranges = changed_frames(previous, constraints, splits)
+    ranges = changed_frames(previous, corrections.constraints, corrections.splits)
     if not ranges:
         return None
     pad = max(MIN_PAD_FRAMES, int(round(RESOLVE_PAD_S * take.rate)))
@@ -280,17 +281,16 @@ def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, p
     current = previous
     for a, b in regions:
         part = _window_take(take, a, b)
-        local = _corrections_in(a, b, constraints, splits, hand_swaps)
+        local = _corrections_in(a, b, corrections)
         if two:
-            local_sides = _sides_from(part, layout, before[a:b], naming, local["hand_swaps"])
+            local_sides = _sides_from(part, layout, before[a:b], settings.naming, local.hand_swaps, cache)
             if local_sides is None:
                 return None
-            local.update(hands=2, sides=local_sides)
+            local_settings = settings.but(hand_count=2, sides=local_sides, window=None)
         else:
-            local.update(hands=1)
-        if progress is not None:
-            progress(f"labeling frames {a}-{b - 1} again, around the changes")
-        new = label(part, layout, window=None, naming=naming, progress=progress, **local, **options)
+            local_settings = settings.but(hand_count=1, window=None)
+        progress(f"labeling frames {a}-{b - 1} again, around the changes", 0.0)
+        new = label(part, local_settings, local, progress)
         if new.names != previous.names:
             return None
         cut_left = a if a == 0 else _quiet_frame(take.valid, a + pad // 4, a + pad // 2)
@@ -312,16 +312,15 @@ def relabel_around(label: Callable[..., Labeling], take: Take, layout: Layout, p
     return current
 
 
-def _sides_from(part: Take, layout: Layout, before: np.ndarray, naming, hand_swaps) -> list[str] | None:
+def _sides_from(part: Take, layout: Layout, before: np.ndarray, naming: str | None, hand_swaps,
+                cache=None) -> list[str] | None:
     """The sides of the two hands :func:`.hands.find_hands` finds in ``part``, in its order: the side
     whose labels the earlier labeling ``before`` (``(F, P)`` of ``part``'s frames) gave most of each
     hand's samples. None where both come out one side."""
-    from .hands import HandNaming, swap_frames
-    from .pipeline import _hands, other_named_points
-
     naming = HandNaming(naming) if isinstance(naming, str) else naming
     swaps = None if hand_swaps is None else swap_frames(hand_swaps, part.n_frames)
-    found = _hands(part, layout, 2, other_named_points(part, layout, naming), swaps)
+    found = remembered_hands(part, layout, 2, other_named_points(part, layout, naming), swaps,
+                             cache if cache is not None else RunCache())
     if found.count != 2:
         return None
     m = len(layout)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import EnumProperty, FloatProperty
 
-from .review import _not_a_take, _present, reviewed_take
+from .common import _not_a_take, _present, reviewed_take
 
 _METHODS = [
     ("auto", "Auto", "Per gap, the method with the lowest expected error: hand (where solved), pose or spline"),

@@ -15,8 +15,8 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
 
 from ..blender.properties import LAYOUT_DEFAULT, _layouts
 from ..core.hands import SIDES
+from .common import context_take, reviewed_take
 from .modal import start_modal
-from .review import context_take, reviewed_take
 
 
 @dataclass

@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import IntProperty
 
-from .review import reviewed_panel_take
+from .common import reviewed_panel_take
 
 
 class MOCAPAL_OT_jump_to_worst(bpy.types.Operator):

@@ -6,7 +6,7 @@ import os
 from collections.abc import Callable
 
 from ..errors import MocapInputError
-from ..take import Take
+from ..take_data import Take
 
 #: File extensions the readers accept, lower case.
 EXTENSIONS = (".c3d", ".trc", ".tsv")

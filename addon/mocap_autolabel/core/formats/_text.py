@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 
 from ..errors import MocapInputError
-from ..take import MAX_RATE
+from ..take_data import MAX_RATE
 
 
 def read_lines(path: str) -> list[str]:

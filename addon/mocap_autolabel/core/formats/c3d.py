@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ... import __version__
 from ..atomic import atomic_output
 from ..errors import MocapInputError
-from ..take import MAX_RATE, Take, mark_missing, to_metres, unit_scale
+from ..take_data import MAX_RATE, Take, mark_missing, to_metres, unit_scale
+from ..version import __version__
 
 BLOCK = 512
 MAGIC = 0x50

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 
 from ..errors import MocapInputError
-from ..take import Take, mark_missing, to_metres, unit_scale
+from ..take_data import Take, mark_missing, to_metres, unit_scale
 from ._text import first_frame_number, frame_count_note, frame_rate, marker_count, marker_table, read_lines
 
 #: QTM writes its TSV exports in millimetres.

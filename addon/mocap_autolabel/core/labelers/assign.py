@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .base import NULL
+from .null import NULL
 
 #: Stands in for "impossible" in cost matrices (finite, so the solver never sees inf - inf).
 _FORBIDDEN = 1e9

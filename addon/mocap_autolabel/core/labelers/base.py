@@ -14,9 +14,8 @@ import numpy as np
 
 from ..layout import Layout
 from ..take import Take
-
-#: Label index meaning "no marker of the layout" (a ghost, a distractor, a merged pair).
-NULL = -1
+from .assign import assign
+from .null import NULL as NULL  # re-exported: the protocol's "null" label
 
 
 @dataclass
@@ -124,8 +123,6 @@ class Labeler(ABC):
 
     def label_points(self, points: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Labels int16 ``(F, K)`` (:data:`NULL` for null) and confidences ``(F, K)`` of padded observations."""
-        from .assign import assign
-
         return assign(self.scores(points, mask), mask)
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..labelers.base import NULL
+from ..labelers.null import NULL
 from .murty import nbest_labelings
 
 

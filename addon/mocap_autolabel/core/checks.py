@@ -1,0 +1,134 @@
+"""The checks every front end applies to a labeling: is there a hand at all (the no-hand rule),
+does another layout fit clearly better, did the vote's bounded work cut a decision short."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .labelers import labeler_method
+from .labeling import Labeling, labeled_take
+from .layout import Layout
+from .take import Take
+from .temporal.voting import MILP_SECONDS
+
+
+@dataclass(frozen=True)
+class LayoutDoubt:
+    """Another layout fits the take clearly better: ``better`` labels ``better_share`` of its labeled
+    samples confidently where ``layout`` labels ``share``. ``str()`` is the one-line warning."""
+
+    layout: str
+    share: float
+    better: str
+    better_share: float
+
+    def __str__(self) -> str:
+        return (f"only {100 * self.share:.1f} % of labeled samples are confident with layout {self.layout!r}, "
+                f"and {100 * self.better_share:.1f} % with {self.better!r}: is this a {self.better} take?")
+
+
+#: A hand is "found" when at least this share of frames has at least half the layout labeled, all
+#: within HAND_REACH (metres) of their median: a hand is about 0.2 m long, a body capture labeled
+#: as a hand spreads its "labels" over half a metre or more.
+HAND_FRAMES, HAND_REACH = 0.3, 0.25
+#: A labeled marker counts towards "a hand is here" only if its segment's mean per-frame
+#: probability (its calibrated confidence for methods whose probabilities run low) is at least this: a
+#: full-body capture labeled with a hand layout gets labels, but ones its labeler does not believe
+#: (``set``: median 0.26 on ezc3d's Vicon.c3d; 0.98 and up on hands).
+BELIEVED = 0.5
+
+
+@dataclass(frozen=True)
+class HandCheck:
+    """Whether a labeled take holds a hand: ``share`` of its frames look like one (see
+    :data:`HAND_FRAMES`); ``better`` names a layout that fits clearly better, if one does.
+    ``str()`` of a failed check is the one-line reason, for errors in the CLI, batch and Blender."""
+
+    share: float
+    layout: str
+    better: str | None = None
+
+    @property
+    def found(self) -> bool:
+        return self.share >= HAND_FRAMES
+
+    def __str__(self) -> str:
+        return self.describe()
+
+    def describe(self, use: str = "--layout {}") -> str:
+        """The one line; ``use`` says how to pick the better layout where one fits (the command
+        line's flag by default; Blender names its panel field)."""
+        if self.found:
+            return f"a hand in {100 * self.share:.0f} % of frames"
+        hint = (f"'{self.better}' fits better: use {use.format(self.better)}" if self.better else
+                f"is this a {self.layout} take?")
+        return (f"no hand found: only {100 * self.share:.0f} % of frames have half of the {self.layout} markers "
+                f"labeled with some confidence within {HAND_REACH:g} m of each other ({hint})")
+
+
+def _believed(labeling: Labeling, m: int) -> np.ndarray:
+    """bool ``(F, M)``: where each label sits on a segment whose mean probability (calibrated
+    confidence for methods whose probabilities are low where right,
+    :attr:`.labelers.LabelerMethod.low_probability`) reaches :data:`BELIEVED`."""
+    seg = labeling.segment_ids()  # (F, P)
+    frame, slot = np.nonzero(seg >= 0)
+    s = seg[frame, slot]
+    method = labeling.info.get("method")
+    low = method is not None and labeler_method(method).low_probability
+    belief = labeling.confidence if low else labeling.evidence[:, 0]
+    keep = (labeling.label[s] >= 0) & (belief[s] >= BELIEVED)
+    out = np.zeros((labeling.n_frames, m), dtype=bool)
+    out[frame[keep], labeling.label[s[keep]]] = True
+    return out
+
+
+def hand_share(markers: np.ndarray, believed: np.ndarray | None = None) -> float:
+    """Share of frames whose labeled markers ``(F, M, 3)`` (metres, NaN = not labeled) look like one
+    hand: at least half of the M labeled, all within :data:`HAND_REACH` of their median.
+    ``believed`` ``(F, M)`` bool keeps only those markers (see :data:`BELIEVED`)."""
+    if believed is not None:
+        markers = np.where(believed[..., None], markers, np.nan)
+    if not len(markers):
+        return 0.0
+    count = np.isfinite(markers[..., 0]).sum(axis=1)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # frames with no labeled marker
+        centre = np.nanmedian(markers, axis=1, keepdims=True)
+        reach = np.nanmax(np.linalg.norm(markers - centre, axis=2), axis=1)
+    return float(((count >= markers.shape[1] / 2) & (reach <= HAND_REACH)).mean())
+
+
+def check_hand(take: Take, layout: Layout, labeling: Labeling, doubt: LayoutDoubt | None = None,
+               labeled: Take | None = None) -> HandCheck:
+    """The no-hand rule the CLI, batch and Blender share: a labeling of ``take`` in which under
+    :data:`HAND_FRAMES` of the frames hold half of ``layout``'s markers, believed and within
+    :data:`HAND_REACH` of each other, found no hand (a body capture, a prop, the wrong layout),
+    however many labels it gave. ``doubt`` (from :func:`layout_doubt`) names the better layout;
+    ``labeled``, ``labeled_take(take, labeling)`` where the caller has it already."""
+    m = len(layout)
+    markers = (labeled if labeled is not None else labeled_take(take, labeling)).positions[:, :m]
+    return HandCheck(hand_share(markers, _believed(labeling, m)), layout.name, doubt.better if doubt else None)
+
+
+def hand_checks(take: Take, layout: Layout, labeling: Labeling,
+                doubt: LayoutDoubt | None = None) -> list[tuple[str, HandCheck]]:
+    """:func:`check_hand` per hand: ``[("", check)]`` for one hand, ``[("left", ...), ("right", ...)]``
+    for a two-hand labeling (each hand's labels on their own)."""
+    hands = labeling.info.get("hands", {})
+    if hands.get("count", 1) < 2:
+        return [("", check_hand(take, layout, labeling, doubt))]
+    m = len(layout)
+    return [(side, check_hand(take, layout, labeling.label_range(h * m, (h + 1) * m), doubt))
+            for h, side in enumerate(hands["sides"])]
+
+
+def time_limit_warning(labeling: Labeling) -> str | None:
+    """A one-line warning when the vote's assignment was stopped by its time limit, else None."""
+    stopped = labeling.info.get("time_limited", 0)
+    if not stopped:
+        return None
+    return (f"the vote's exclusive assignment stopped at its {MILP_SECONDS:g} s limit {stopped} time(s): the "
+            f"labels are the best found by then (takes of hands need far less; is this a hand?)")

@@ -1,0 +1,141 @@
+"""Solving the hand: a labeled take to a calibrated hand fitted in every frame (one per side)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import MocapInputError
+from .hand.calibrate import Calibration, calibrate
+from .hand.ik import GATE, MIN_MARKERS, Fit, HandSolver
+from .hands import HandNaming, split_hands
+from .labeling import layout_markers
+from .layout import Layout
+from .take import Take
+
+
+@dataclass
+class HandSolve:
+    """A hand solved over a labeled take.
+
+    Attributes:
+        calibration: the performer's hand and markers it was solved with.
+        fit: poses ``(F, 26)``, fitted markers and residuals per frame.
+        layout: the marker layout.
+        rate: frames per second; first_frame: the take's first frame number.
+        seconds: wall time of each stage.
+        hand_solver: the solver the fit came from; None: the calibration's (:meth:`solver`).
+    """
+
+    calibration: Calibration | None
+    fit: Fit
+    layout: Layout
+    rate: float
+    first_frame: int
+    seconds: dict
+    hand_solver: HandSolver | None = None
+
+    def solver(self) -> HandSolver:
+        """The calibrated hand and its markers, as solved."""
+        if self.hand_solver is None:
+            self.hand_solver = self.calibration.solver(self.layout)
+        return self.hand_solver
+
+    def report(self) -> dict:
+        """Per-frame and overall marker RMS in millimetres, per-marker RMS, calibration, timings."""
+        fit = self.fit
+        rms = fit.rms * 1000
+        gate = np.isfinite(rms) & (rms > GATE * 1000)
+        with np.errstate(invalid="ignore"):
+            per_marker = np.sqrt(np.nanmean(np.where(fit.solved[:, None], fit.residuals, np.nan) ** 2, axis=0)) * 1000
+        return {
+            "layout": self.layout.name,
+            "frames": len(rms),
+            "solved_frames": int(fit.solved.sum()),
+            "marker_rms_mm": round(fit.overall_rms() * 1000, 4),
+            "frames_over_gate": int(gate.sum()),
+            "gate_mm": GATE * 1000,
+            "per_marker_rms_mm": {n: (round(float(v), 4) if np.isfinite(v) else None)
+                                  for n, v in zip(self.layout.names, per_marker)},
+            "per_frame_rms_mm": [round(float(v), 3) if np.isfinite(v) else None for v in rms],
+            "calibration": self.calibration.to_dict(),
+            "seconds": self.seconds,
+        }
+
+
+#: The share of a solve's time its calibration takes (measured on the demo and glove takes: 75-80 %).
+CALIBRATE_SHARE = 0.75
+
+
+def solve_take(take: Take, layout: Layout, calibration: Calibration | None = None,
+               calibrate_seconds: float | None = None, reference: Sequence[int] | None = None,
+               contacts: Sequence[tuple[int, str]] = (), side: str | None = None,
+               smooth_hz: float = 10.0, progress: Callable[[str, float], None] | None = None) -> HandSolve:
+    """Fit the hand to a labeled take: calibrate (unless given a calibration), then solve every frame.
+
+    Args:
+        take: a labeled take whose point names include every marker of ``layout``.
+        layout: the marker layout.
+        calibration: a performer's calibration to reuse; None calibrates on this take.
+        calibrate_seconds: calibrate on the take's first seconds only (default: all of it).
+        reference: frames (0-based) in which the hand is flat (see :func:`calibrate`).
+        contacts: pinch frames ``(frame, finger)`` for the calibration (see :func:`calibrate`).
+        side: ``left``/``right``; detected from the markers when None.
+        smooth_hz: low-pass cut-off for the pose track (0: none).
+        progress: called with a stage message and the share of the work done (0-1) as the solve
+            goes (a calibration is about three quarters of it: 20 s of 25 s on the 1,200-frame
+            demo take); it may raise to stop the solve (a cancelled :class:`~.jobs.Job` does).
+    """
+    say = progress or (lambda _msg, _share: None)
+    observed = layout_markers(take, layout)
+    if not (np.isfinite(observed).all(axis=-1).sum(axis=1) >= MIN_MARKERS).any():
+        raise MocapInputError(take.source, f"no frame shows {MIN_MARKERS} or more of the layout's markers")
+    seconds = {}
+    start = time.perf_counter()
+    if calibration is None:
+        say("calibrating the hand", 0.0)
+        stop = len(observed) if calibrate_seconds is None else max(1, int(round(calibrate_seconds * take.rate)))
+        bad = [f for f, _ in contacts if not 0 <= f < stop]
+        if bad:
+            raise MocapInputError(take.source, f"pinch frames {bad[:5]} lie outside the calibration frames "
+                                               f"0-{stop - 1}")
+        calibration = calibrate(observed[:stop], layout, side=side, contacts=contacts,
+                                reference=None if reference is None else np.asarray(reference),
+                                progress=lambda done: say(f"calibrating the hand ({100 * done:.0f} %)",
+                                                          CALIBRATE_SHARE * done))
+    else:
+        calibration.check(layout, "calibration")
+        if side is not None and side != calibration.side:
+            raise MocapInputError("calibration", f"is for a {calibration.side} hand, not a {side} one")
+    seconds["calibrate"] = round(time.perf_counter() - start, 4)
+    start = time.perf_counter()
+    share0 = CALIBRATE_SHARE if seconds["calibrate"] > 0.05 else 0.0  # where the frames' share starts
+    say("solving frames", share0)
+    solver = calibration.solver(layout)
+    fit = solver.solve(
+        observed, rate=take.rate, smooth_hz=smooth_hz,
+        progress=lambda done: say(f"solving frames ({100 * done:.0f} %)", share0 + (1 - share0) * done))
+    seconds["solve"] = round(time.perf_counter() - start, 4)
+    return HandSolve(calibration, fit, layout, float(take.rate), int(take.first_frame), seconds, solver)
+
+
+def solve_hands(take: Take, layout: Layout, naming: HandNaming | None = None,
+                calibrations: dict[str, Calibration] | None = None, **options) -> list[tuple[str, HandSolve]]:
+    """Solve every hand of a labeled take: ``[(side, HandSolve)]``, side ``""`` for a take labeled
+    with plain names (one hand), else ``"left"`` / ``"right"`` read off the names
+    (:func:`.hands.split_hands`); each hand calibrated on its own (size, side, marker offsets)
+    unless ``calibrations[side]`` is given. ``options`` go to :func:`solve_take`."""
+    out = []
+    for side, one in split_hands(take, layout, naming):
+        given = (calibrations or {}).get(side)
+        kwargs = dict(options)
+        if side and kwargs.get("side") is None:
+            kwargs["side"] = side
+        try:
+            out.append((side, solve_take(one, layout, calibration=given, **kwargs)))
+        except MocapInputError as exc:
+            raise MocapInputError(take.source, f"{side} hand: {exc.problem}" if side else exc.problem) from exc
+    return out

@@ -1,0 +1,163 @@
+"""The stages after the first decision: ``refine`` (the hands' second look, hands that traded
+places, IK validation) and ``checks`` (two hands against one, rigid props). Each either changes
+the run's labeling or returns a :class:`.run.Retry` for the pipeline's loop."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from ..hands import identity_swaps, swap_ranges
+from ..labeling import Labeling
+from ..props import Prop, find_props, prop_mask, rigid_groups
+from ..take import Take
+from ..temporal.voting import Samples
+from .decide import decide
+from .hands import labeled_handedness, offer_nulls
+from .run import Attempt, LabelRun, Retry
+from .scoring import all_hand_scores, apply_constraints, joint_scores, offered_to, score_samples
+
+#: The hands' second look is taken right after the first vote, before the evidence of partners
+#: and continuity is read off it (one vote fewer), where it offers at most this share of that
+#: vote's segments to both hands: hands apart, as han2018's (about 1 % of segments, labels
+#: identical to a look after the whole labeling). Hands that touch (5-40 %) take it after the
+#: whole labeling, as that evidence then reads off fewer wrong nulls.
+LOOK_EARLY_SHARE = 0.03
+#: Below this share of confident labeled samples a labeling is doubtful: two hands are checked
+#: against one, and other layouts are tried (:mod:`..process`).
+DOUBTFUL_SHARE = 0.5
+#: How much more of the samples another reading of the take must label confidently to be preferred.
+CLEARLY_BETTER = 0.3
+
+
+def look_again(run: LabelRun, looked_at: Labeling, early: bool = False) -> tuple[Samples, np.ndarray] | None:
+    """A marker given to the wrong hand is one its labeler rejects: the trajectories ``looked_at``
+    left null near the other hand are offered to both hands and scored again (the run's scores
+    and samples change). ``early``: ``looked_at`` is the first vote, and the evidence of partners
+    and continuity is still to be read off it; where more than :data:`LOOK_EARLY_SHARE` of its
+    segments would be offered (hands that touch), nothing is done: the look waits for the whole
+    labeling. Returns the samples scored again and the hands each is offered to, or None."""
+    most = LOOK_EARLY_SHARE * len(looked_at) if early else np.inf
+    offered, rows = offer_nulls(run.found, looked_at, run.take_in, most)
+    if offered > most:
+        return None
+    run.info["hands_offered_again"] = offered
+    if not offered:
+        return None
+    run.say("temporal step: both hands again")
+    t = time.perf_counter()
+    # A hand whose points did not change keeps its scores (those of a long take are not kept in
+    # the cache: passed on here).
+    run.hand_scores = [all_hand_scores(run, run.found.members(h), [(run.scored_members[h], run.hand_scores[h])])
+                       for h in range(2)]
+    run.joint = run.joint.copy()
+    run.joint[rows] = joint_scores(run.hand_scores, run.found, run.batch, rows)
+    run.member = offered_to(run)
+    run.scores = apply_constraints(run.joint, run.batch.slots, run.batch.mask, run.constraints)
+    run.samples = score_samples(run.scores, run.batch, rows, run.samples)
+    run.times["hands_again"] = time.perf_counter() - t
+    return run.samples, run.member
+
+
+def _traded_places(run: LabelRun) -> np.ndarray | None:
+    """Where the hands touched, the tracker may have carried each hand's identity on with the
+    other: the labeled markers' handedness says where (bool ``(F,)``; None: nowhere)."""
+    if run.found.count != 2 or run.swaps is not None:
+        return None
+    traded = identity_swaps(labeled_handedness(run.take, run.layout, run.labeling, 2), run.found.centre)
+    return traded if traded.any() else None
+
+
+def refine_stage(run: LabelRun) -> Retry | None:
+    """The hands' second look after the whole labeling (hands that touch, or no vote to look again
+    after) and the labeling again with its evidence; where the hands traded places, a new pass
+    with those frames swapped."""
+    traded = _traded_places(run)  # before more work is spent on this labeling
+    if run.found.count == 2 and traded is None and "hands_offered_again" not in run.info:
+        rescored = look_again(run, run.labeling)
+        if rescored is not None:
+            run.labeling = decide(run, run.scores, first=run.labeling, samples=rescored[0])
+            traded = _traded_places(run)  # the second look labels more of a hand that traded places
+    if traded is not None:
+        attempt = replace(run.attempt, corrections=run.corrections.but(hand_swaps=swap_ranges(traded)),
+                          labeler=run.labeler)
+        return Retry("labeling again: the hands traded places where they touched", attempt)
+    run.say("decided", run.decided_share)
+    return None
+
+
+def validate_stage(run: LabelRun) -> None:
+    """IK validation: fit the hand to the labels, vote again with the fit's evidence and downgrade
+    the segments the hand cannot explain (``info["validation"]``)."""
+    if not run.settings.validate:
+        return
+    from ..validate import downgrade, fit_labeling, fit_scores, segment_residuals
+
+    run.say("validating with the hand fit")
+    t = time.perf_counter()
+    take, batch = run.take, run.batch
+    hand, hand_fit = fit_labeling(take, run.layout, run.labeling, run.settings.validate_hand)
+    run.labeling = decide(run, run.scores + fit_scores(batch.points, batch.mask, hand_fit.markers,
+                                                       spread=hand_fit.overall_rms()))
+    residuals = segment_residuals(take, run.labeling, hand_fit)
+    run.info["validation"] = {"hand_length_mm": round(hand.length * 1000, 2), "side": hand.side,
+                              "marker_rms_mm": round(hand_fit.overall_rms() * 1000, 3),
+                              "downgraded_segments": downgrade(run.labeling, residuals)}
+    run.timed("validate", t)
+
+
+def one_hand_stage(run: LabelRun) -> Retry | None:
+    """Two hands must explain the take better than one: a hand with more markers than the layout
+    (a han19 glove labeled with glove13) also splits into two groups of points. Where two hands
+    label under :data:`DOUBTFUL_SHARE` of their samples confidently, the take is labeled as one
+    hand, which is kept unless two hands do clearly better."""
+    settings = run.settings
+    if not (run.found.count == 2 and str(settings.hand_count) == "auto" and not run.constraints):
+        return None
+    two = run.labeling.summary()["confident_share"]
+    if two >= DOUBTFUL_SHARE:
+        return None
+    single = Attempt(settings.but(hand_count=1, sides=None, validate=False),
+                     run.corrections.but(constraints=(), hand_swaps=None), run.labeler)
+
+    def better(one_hand: Labeling) -> Labeling | None:
+        one = one_hand.summary()["confident_share"]
+        if two < one + CLEARLY_BETTER / 3:
+            one_hand.info["hands"].update(two_hands_rejected={"two": round(two, 4), "one": round(one, 4)})
+            return one_hand
+        return None
+
+    return Retry("checking against one hand", single, better)
+
+
+def props_stage(run: LabelRun) -> Retry | None:
+    """Rigid props among the trajectories (:mod:`..props`): a rigid group the labeler mostly left
+    null, some of which took hand labels, is kept out and the take labeled again."""
+    if not (run.settings.props and run.mode.uses_evidence):
+        return None
+    t = time.perf_counter()
+    found = _props(run.take, run.tracklets, run.labeling, len(run.labels), run.cache)
+    run.timed("props", t)
+    if not found:
+        return None
+    exclude = prop_mask(found, run.take.n_frames, run.take.n_points)
+    if run.corrections.exclude is not None:
+        exclude = exclude | run.corrections.exclude
+    attempt = Attempt(run.settings.but(props=False), run.corrections.but(exclude=exclude), run.attempt.labeler,
+                      run.attempt.notes + (("props", [p.as_dict() for p in found]),))
+    return Retry(f"labeling again without {len(found)} rigid prop(s)", attempt)
+
+
+def _props(take: Take, tracklets, labeling: Labeling, n_labels: int, cache) -> list[Prop]:
+    """The rigid props of a labeled take (:func:`..props.find_props`), judged by the labels its
+    trajectories mostly took."""
+    per = labeling.per_sample()
+    ids = tracklets.id_map(take.n_frames, take.n_points)
+    f, p = np.nonzero(ids >= 0)
+    votes = np.bincount(ids[f, p].astype(np.int64) * (n_labels + 1) + (per[f, p].astype(np.int64) + 1),
+                        minlength=len(tracklets) * (n_labels + 1)).reshape(len(tracklets), n_labels + 1)
+    positions = np.where(take.valid[..., None], take.positions, np.nan)
+    groups = cache.remember("rigid_groups", cache.take_key(take), lambda: rigid_groups(positions, tracklets, take.rate))
+    return find_props(positions, tracklets, take.rate, votes.argmax(axis=1) - 1, groups=groups)
