@@ -44,7 +44,7 @@ from mocap_autolabel.core.hand.calibrate import calibrate  # noqa: E402
 from mocap_autolabel.core.hand.ik import HandSolver  # noqa: E402
 from mocap_autolabel.core.labeling import layout_markers  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
-from mocap_autolabel.core.pipeline import HandSolve  # noqa: E402
+from mocap_autolabel.core.solve import HandSolve  # noqa: E402
 from mocap_autolabel.core.synth.generate import marker_motion, synthesize  # noqa: E402
 from mocap_autolabel.core.take import Take, read_take  # noqa: E402
 

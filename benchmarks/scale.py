@@ -93,6 +93,7 @@ def child_label(path: str, whole: bool = False, warm: bool = False) -> dict:
     import numpy as np
     from mocap_autolabel.core.layout import load_layout
     from mocap_autolabel.core.pipeline import label_take
+    from mocap_autolabel.core.settings import LabelSettings
     from mocap_autolabel.core.take import read_take
 
     layout = load_layout("han19")
@@ -107,7 +108,7 @@ def child_label(path: str, whole: bool = False, warm: bool = False) -> dict:
     take_rss = _rss()
     with StagePeaks() as peaks:
         t = time.perf_counter()
-        labeling = label_take(take, layout, progress=peaks, **({"window": None} if whole else {}))
+        labeling = label_take(take, layout, LabelSettings(**({"window": None} if whole else {})), progress=peaks)
         total = time.perf_counter() - t
     np.save(_labels_path(path, whole), labeling.per_sample())
     return {"windows": len(labeling.info.get("windows", [])) or 1,
@@ -120,7 +121,7 @@ def child_label(path: str, whole: bool = False, warm: bool = False) -> dict:
 def child_solve(path: str) -> dict:
     """Calibrate and solve the labeled one-hand take at ``path``; seconds and peak memory per stage."""
     from mocap_autolabel.core.layout import load_layout
-    from mocap_autolabel.core.pipeline import solve_take
+    from mocap_autolabel.core.solve import solve_take
     from mocap_autolabel.core.take import read_take
 
     layout = load_layout("han19")

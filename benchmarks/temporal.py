@@ -32,6 +32,7 @@ from mocap_autolabel.core.labelers.gmm import GmmLabeler  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
 from mocap_autolabel.core.metrics import clustered_se, score_labeling, segments_right  # noqa: E402
 from mocap_autolabel.core.pipeline import label_take  # noqa: E402
+from mocap_autolabel.core.settings import LabelSettings  # noqa: E402
 from mocap_autolabel.core.synth.generate import GHOST, _pack, corrupt_take, save_synth, synthesize  # noqa: E402
 from mocap_autolabel.core.take import Take  # noqa: E402
 from mocap_autolabel.core.tracklets import find_tracklets  # noqa: E402
@@ -100,8 +101,8 @@ def run(cases: list[Case], layout, method: str, temporal: str, score: str) -> tu
         if method == "gmm":
             gmm = fitted.get(id(c.fit)) or GmmLabeler(layout).fit(c.fit)
             fitted[id(c.fit)] = gmm
-        labeling = label_take(c.take, layout, method=method, temporal=temporal, score=score or "likelihood",
-                              labeler=gmm, start=c.start if method == "nearest" else None)
+        settings = LabelSettings(method=method, temporal=temporal, vote_score=score or "likelihood")
+        labeling = label_take(c.take, layout, settings, labeler=gmm, start=c.start if method == "nearest" else None)
         seconds += time.perf_counter() - t
         s = score_labeling(labeling.per_sample(), c.truth, c.take.valid, len(layout)).as_dict()
         per_take.append([s[key] for key in COUNTS])

@@ -35,6 +35,7 @@ from mocap_autolabel.core.formats.c3d import write_c3d  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
 from mocap_autolabel.core.metrics import clustered_se, score_labeling  # noqa: E402
 from mocap_autolabel.core.pipeline import label_take  # noqa: E402
+from mocap_autolabel.core.settings import LabelSettings  # noqa: E402
 from mocap_autolabel.core.synth.generate import corrupt_take  # noqa: E402
 from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take  # noqa: E402
 from mocap_autolabel.core.take import read_take  # noqa: E402
@@ -90,7 +91,7 @@ def run_han(layout, limit: int | None) -> dict:
         one = []
         for j, hand in enumerate((a, b)):
             t1, tr1, _ = corrupt_take(hand, 120.0, seed=100_000 * (j + 1) + seed)
-            s1 = score(label_take(t1, layout, hands=1), t1, tr1, m)
+            s1 = score(label_take(t1, layout, LabelSettings(hand_count=1)), t1, tr1, m)
             one.append([s1["instances"], s1["correct"], s1["frames"], s1["frames_all_correct"]])
         rows["one"].append(np.sum(one, axis=0))
         print(f"  {name}: {take.n_frames} frames, {hands['count']} hands, {100 * s['correct'] / s['instances']:.2f} % "
@@ -159,7 +160,7 @@ def run_props(layout, takes: int, frames: int = 1200) -> dict:
         hand = np.ones(valid.shape[1], dtype=bool)
         hand[ps] = False
         for check in (False, True):
-            lab = label_take(two.take, layout, props=check)
+            lab = label_take(two.take, layout, LabelSettings(props=check))
             per = lab.per_sample()
             rows[check] += [((per[:, ps] >= 0) & valid[:, ps]).sum(), valid[:, ps].sum(),
                             ((per == two.labels) & valid)[:, hand].sum(), valid[:, hand].sum()]

@@ -21,6 +21,7 @@ from datasets import write_report  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
 from mocap_autolabel.core.metrics import score_labeling, segments_right  # noqa: E402
 from mocap_autolabel.core.pipeline import label_take  # noqa: E402
+from mocap_autolabel.core.settings import LabelSettings  # noqa: E402
 from temporal import glove_case, han_cases  # noqa: E402
 
 REPORT = os.path.join(os.path.dirname(__file__), "reports", "validation.md")
@@ -31,7 +32,7 @@ def measure(cases, layout, validate: bool) -> dict:
     out["seconds"] = 0.0
     for c in cases:
         t = time.perf_counter()
-        labeling = label_take(c.take, layout, validate=validate)
+        labeling = label_take(c.take, layout, LabelSettings(validate=validate))
         out["seconds"] += time.perf_counter() - t
         s = score_labeling(labeling.per_sample(), c.truth, c.take.valid, len(layout)).as_dict()
         for key in ("correct", "instances", "frames_all_correct", "frames"):

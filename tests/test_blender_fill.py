@@ -143,7 +143,7 @@ def test_a_new_solve_refills_the_gaps_filled_from_the_hand(labeled):
     from mocap_autolabel.core.hand.calibrate import detect_side
     from mocap_autolabel.core.hand.ik import HandSolver
     from mocap_autolabel.core.labeling import labeled_take, layout_markers
-    from mocap_autolabel.core.pipeline import HandSolve
+    from mocap_autolabel.core.solve import HandSolve
 
     bpy, coll = labeled
     layout = load_layout("han19")

@@ -164,9 +164,11 @@ def test_train_command_writes_a_model_and_card(tmp_path, capsys):
     assert card["layout"]["name"] == "tips3" and card["method"] == "set"
     # The model labels (20 steps are too few to find the hand: the CLI would refuse the take, as batch does)
     from mocap_autolabel.core.pipeline import label_take
+    from mocap_autolabel.core.settings import LabelSettings
     from mocap_autolabel.core.take import read_take
 
-    labeling = label_take(read_take(ROOT / "samples" / "demo_take.c3d"), load_layout("tips3"), model=str(out))
+    labeling = label_take(read_take(ROOT / "samples" / "demo_take.c3d"), load_layout("tips3"),
+                          LabelSettings(model=str(out)))
     assert labeling.n_frames == 1200 and labeling.info["layout"] == "tips3"
 
 

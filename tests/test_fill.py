@@ -13,8 +13,8 @@ from mocap_autolabel.core.formats.c3d import read_c3d, write_c3d
 from mocap_autolabel.core.hand import HandModel
 from mocap_autolabel.core.hand.ik import HandSolver
 from mocap_autolabel.core.layout import load_layout
-from mocap_autolabel.core.pipeline import HandSolve
 from mocap_autolabel.core.rotations import rotvec_to_matrix
+from mocap_autolabel.core.solve import HandSolve
 from mocap_autolabel.core.synth.generate import marker_motion
 from mocap_autolabel.core.take import Take
 

@@ -37,12 +37,13 @@ def test_rigid_groups_find_the_prop_and_not_the_moving_fingers():
 
 def test_a_prop_that_took_hand_labels_is_kept_out_and_named_in_the_info():
     from mocap_autolabel.core.pipeline import label_take
+    from mocap_autolabel.core.settings import LabelSettings
     from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take
 
     layout = load_layout("han19")
     two = two_hand_take(layout, 1200, seed=1, config=TwoHandConfig(prop_markers=4))
     ps, valid = two.prop_slots, two.take.valid
-    before = label_take(two.take, layout, props=False).per_sample()
+    before = label_take(two.take, layout, LabelSettings(props=False)).per_sample()
     assert ((before[:, ps] >= 0) & valid[:, ps]).mean() > 0.1  # the prop steals without the check
     lab = label_take(two.take, layout)
     after = lab.per_sample()

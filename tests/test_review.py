@@ -20,6 +20,7 @@ from mocap_autolabel.core.review import (
     segment_classes,
     uncertain_segments,
 )
+from mocap_autolabel.core.settings import Corrections, LabelSettings
 from mocap_autolabel.core.synth.generate import synthesize
 
 
@@ -59,7 +60,8 @@ def test_corrections_are_constraints_and_resolve_keeps_them(labeled):
     review.unlabel(lab, ghost, frame)
     review.split(lab, b, frame + 50)
     assert len(review.constraints) == 3 and review.splits == [(b, frame + 50)]
-    again = label_take(take, layout, constraints=review.constraints, splits=review.splits, labeler=labeler)
+    again = label_take(take, layout, corrections=Corrections(constraints=review.constraints, splits=review.splits),
+                       labeler=labeler)
     after = again.per_sample()
     seg_a = (lab.slot == a) & (lab.start <= frame) & (lab.stop > frame)
     stop_a = int(lab.stop[seg_a][0])
@@ -170,9 +172,10 @@ def test_remembering_labeler_serves_both_hands_of_a_re_solve():
             return inner.scores(points, mask)
 
     labeler = RememberingLabeler(Counting())
-    first = label_take(take, layout, labeler=labeler, hands=2)
+    first = label_take(take, layout, LabelSettings(hand_count=2), labeler=labeler)
     assert len(calls) == 2
-    again = label_take(take, layout, labeler=labeler, hands=2, sides=first.info["hands"]["by_hand_order"])
+    again = label_take(take, layout, LabelSettings(hand_count=2, sides=first.info["hands"]["by_hand_order"]),
+                       labeler=labeler)
     assert len(calls) == 2 and again.names == first.names
     np.testing.assert_array_equal(again.per_sample(), first.per_sample())
 

@@ -100,14 +100,16 @@ def test_stride_follows_the_frame_rate(rate, stride):
 
 def test_label_take_scores_every_4th_frame_at_120_hz_and_labels_as_with_every_frame(han19):
     from mocap_autolabel.core.pipeline import label_take
+    from mocap_autolabel.core.settings import LabelSettings
     from mocap_autolabel.core.synth.generate import synthesize
 
     s = synthesize(han19, 1200, seed=3)
     assert s.take.rate == 120.0
-    strided, every = label_take(s.take, han19), label_take(s.take, han19, stride=1)
+    strided, every = label_take(s.take, han19), label_take(s.take, han19, LabelSettings(stride=1))
     assert (strided.info["stride"], every.info["stride"]) == (4, 1)
     valid = s.take.valid
     for lab in (strided, every):
         per = lab.per_sample()
         assert ((per == np.where(s.labels >= 0, s.labels, -1)) | ~valid).mean() > 0.995
-    assert label_take(s.take, han19, temporal="none").info["stride"] == 1  # per-frame labels need every frame
+    per_frame = label_take(s.take, han19, LabelSettings(temporal="none"))
+    assert per_frame.info["stride"] == 1  # per-frame labels need every frame

@@ -7,11 +7,15 @@ import itertools
 import numpy as np
 import pytest
 from conftest import ROOT, data_path
+from mocap_autolabel.core.checks import time_limit_warning
 from mocap_autolabel.core.errors import MocapInputError
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint, labeled_take, segments_from_runs
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import segments_right
-from mocap_autolabel.core.pipeline import DOUBTFUL_SHARE, label_take, layout_doubt, time_limit_warning
+from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.process import layout_doubt
+from mocap_autolabel.core.settings import Corrections, LabelSettings
+from mocap_autolabel.core.stages.refine import DOUBTFUL_SHARE
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
 from mocap_autolabel.core.temporal.confidence import (
@@ -201,9 +205,10 @@ def test_label_take_uses_the_shipped_vote_settings_unless_given_them():
     info = label_take(s.take, layout).info
     assert info["null_prior"] == list(shipped) and info["switch_cost"] == list(switch)
     assert info["partner"] == list(partner) and info["continuity"] == list(continuity)
-    info = label_take(s.take, layout, null_prior=(0.0, 0.0), switch_cost=(0.0, 0.0), partner=(0.0, 0.0)).info
+    info = label_take(s.take, layout, LabelSettings(null_prior=(0.0, 0.0), switch_cost=(0.0, 0.0),
+                                                   partner=(0.0, 0.0))).info
     assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0] and info["partner"] == [0.0, 0.0]
-    info = label_take(s.take, layout, score="power").info  # fitted for the likelihood score only
+    info = label_take(s.take, layout, LabelSettings(vote_score="power")).info  # fitted for the likelihood score only
     assert info["null_prior"] == [0.0, 0.0] and info["switch_cost"] == [0.0, 0.0] and info["partner"] == [0.0, 0.0]
     for load in (load_null_prior, load_switch_cost, load_partner):
         assert load("set", "vote", "no_such_layout") == (0.0, 0.0)
@@ -318,8 +323,8 @@ def _accuracy(labeling, take, truth):
 
 
 def test_vote_fixes_per_frame_flicker(han19, synth_take):
-    none = label_take(synth_take.take, han19, temporal="none")
-    vote = label_take(synth_take.take, han19, temporal="vote")
+    none = label_take(synth_take.take, han19, LabelSettings(temporal="none"))
+    vote = label_take(synth_take.take, han19, LabelSettings(temporal="vote"))
     a_none, a_vote = _accuracy(none, synth_take.take, synth_take.labels), _accuracy(vote, synth_take.take,
                                                                                    synth_take.labels)
     assert a_vote > a_none and a_vote > 0.995
@@ -343,7 +348,7 @@ def test_constraints_are_honoured_and_propagate(han19, synth_take):
     cons = [Constraint(int(base.slot[a]), int(base.start[a]), int(base.stop[a]), int(base.label[b])),
             Constraint(int(base.slot[ghost]), int(base.start[ghost]), int(base.stop[ghost]), NULL)]
     for temporal in ("vote", "none", "viterbi"):
-        lab = label_take(take, han19, temporal=temporal, constraints=cons)
+        lab = label_take(take, han19, LabelSettings(temporal=temporal), corrections=Corrections(constraints=cons))
         per = lab.per_sample()
         rows = slice(base.start[a], base.stop[a])
         on_a = per[rows, base.slot[a]]
@@ -359,11 +364,11 @@ def test_constraints_are_honoured_and_propagate(han19, synth_take):
 def test_conflicting_or_bad_constraints_are_clear_errors(han19, synth_take):
     take = synth_take.take
     with pytest.raises(ValueError, match="constraints conflict"):
-        label_take(take, han19, constraints=[Constraint(0, 0, 10, 3), Constraint(1, 5, 20, 3)])
+        label_take(take, han19, corrections=Corrections(constraints=[Constraint(0, 0, 10, 3), Constraint(1, 5, 20, 3)]))
     with pytest.raises(ValueError, match="outside the take"):
-        label_take(take, han19, constraints=[Constraint(999, 0, 10, 3)])
+        label_take(take, han19, corrections=Corrections(constraints=[Constraint(999, 0, 10, 3)]))
     with pytest.raises(ValueError, match="not in the layout"):
-        label_take(take, han19, constraints=[Constraint(0, 0, 10, 42)])
+        label_take(take, han19, corrections=Corrections(constraints=[Constraint(0, 0, 10, 42)]))
 
 
 def test_crossing_trajectories_that_trade_markers_are_cut_where_they_trade():
@@ -722,8 +727,8 @@ def test_a_thumb_tip_read_as_null_is_labeled_at_its_rigid_distance_from_thumb_ip
             return np.log(p)
 
     labeler = TruthLabeler()
-    without = label_take(s.take, han19, labeler=labeler, partner=(0.0, 0.0))
-    with_partner = label_take(s.take, han19, labeler=labeler, partner=(2.0, 2.0))
+    without = label_take(s.take, han19, LabelSettings(partner=(0.0, 0.0)), labeler=labeler)
+    with_partner = label_take(s.take, han19, LabelSettings(partner=(2.0, 2.0)), labeler=labeler)
     slot = int(np.flatnonzero((s.labels == tip).any(axis=0))[0])
     assert set(without.per_sample()[:, slot].tolist()) == {NULL}
     assert set(with_partner.per_sample()[:, slot].tolist()) == {tip}
@@ -804,7 +809,7 @@ def test_perm_and_cnn_vote_with_sets_settings_and_are_calibrated_at_them(tmp_pat
             assert load_calibration(method, "vote", layout).never_sure  # 73-90 % of segments right: no promise
     assert not load_calibration("set", "vote", "han19").never_sure
     demo = read_take(ROOT / "samples" / "demo_take.c3d")
-    lab = label_take(demo, load_layout("han19"), method="perm")
+    lab = label_take(demo, load_layout("han19"), LabelSettings(method="perm"))
     assert lab.info["null_prior"] == shipped["set/vote/han19"]["null_prior"] and lab.info["never_confident"]
     assert "never_confident" not in label_take(demo, load_layout("han19")).info
     out = tmp_path / "confidence.json"  # the training script's path for them, on two short takes

@@ -28,7 +28,9 @@ from mocap_autolabel.core.hands import (
 from mocap_autolabel.core.labeling import Constraint, labeled_take
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import score_labeling
-from mocap_autolabel.core.pipeline import label_take, solve_hands, solve_take
+from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.settings import Corrections, LabelSettings
+from mocap_autolabel.core.solve import solve_hands, solve_take
 from mocap_autolabel.core.synth.generate import corrupt_take, load_truth, synthesize
 from mocap_autolabel.core.synth.two_hands import TwoHandConfig, save_two_hands, two_hand_take
 from mocap_autolabel.core.take import Take, read_take
@@ -68,13 +70,13 @@ def test_one_hand_take_stays_one_hand_with_plain_names(han19):
     lab = label_take(take, han19)
     assert lab.info["hands"]["count"] == 1 and lab.names == han19.names
     # Asked for, one hand gets its side in its names too.
-    named = label_take(take, han19, naming="vicon")
+    named = label_take(take, han19, LabelSettings(naming="vicon"))
     side = named.info["hands"]["sides"][0]
     assert named.names[0] == f"{side.capitalize()}Hand:ThumbCMC"
 
 
 def test_forcing_two_hands_on_one_hand_says_so(han19):
-    lab = label_take(synthesize(han19, 300, seed=6).take, han19, hands=2)
+    lab = label_take(synthesize(han19, 300, seed=6).take, han19, LabelSettings(hand_count=2))
     assert lab.info["hands"]["count"] == 1 and lab.info["hands"]["forced"] == 2
 
 
@@ -96,21 +98,21 @@ def test_a_hand_with_more_markers_than_the_layout_is_not_two_hands(han19, monkey
 
 
 def test_forcing_one_hand_on_two_hands_labels_one_hand(han19, apart):
-    lab = label_take(apart.take, han19, hands=1)
+    lab = label_take(apart.take, han19, LabelSettings(hand_count=1))
     assert lab.info["hands"]["count"] == 1 and len(lab.names) == len(han19)
 
 
 def test_sides_can_be_overridden_and_both_right_is_refused(han19, apart):
     auto = label_take(apart.take, han19)
     order = auto.info["hands"]["by_hand_order"]
-    swapped = label_take(apart.take, han19, sides=order[::-1])
+    swapped = label_take(apart.take, han19, LabelSettings(sides=order[::-1]))
     assert swapped.info["hands"]["forced"]
     m = len(han19)
     a, b = auto.per_sample(), swapped.per_sample()
     both = (a >= 0) & (b >= 0)
     assert ((a[both] + m) % (2 * m) == b[both]).mean() > 0.99  # the hands traded names
     with pytest.raises(ValueError, match="one left and one right"):
-        label_take(apart.take, han19, sides=["right", "right"])
+        label_take(apart.take, han19, LabelSettings(sides=["right", "right"]))
 
 
 def test_joint_side_decision_never_calls_both_hands_right():
@@ -155,8 +157,11 @@ def test_hands_that_trade_places_where_they_touch_keep_their_sides(han19):
     assert relabel_options(lab.info)["hand_swaps"] == swaps
     # Labeled again with a correction (as a reviewer's re-solve does), the hands stay traded.
     f, p = map(int, np.argwhere(ok)[0])
-    again = label_take(take, han19, constraints=[Constraint(p, f, f + 1, int(per[f, p]))],
-                       **relabel_options(lab.info))
+    options = relabel_options(lab.info)
+    again = label_take(take, han19, LabelSettings(hand_count=options["hands"], sides=options["sides"],
+                                                  naming=options.get("naming")),
+                       corrections=Corrections(constraints=[Constraint(p, f, f + 1, int(per[f, p]))],
+                                               hand_swaps=options["hand_swaps"]))
     assert again.info["hands"]["swaps"] == swaps
     assert (again.per_sample()[take.valid] == per[take.valid]).mean() > 0.99
 
@@ -179,10 +184,10 @@ def test_constraints_name_the_hand(han19, apart):
     # Lock the right hand's first labeled segment as null, then as the left hand's same marker.
     i = int(np.flatnonzero(lab.label >= m)[0])
     slot, start, stop = int(lab.slot[i]), int(lab.start[i]), int(lab.stop[i])
-    ghost = label_take(apart.take, han19, constraints=[Constraint(slot, start, stop, -1)])
+    ghost = label_take(apart.take, han19, corrections=Corrections(constraints=[Constraint(slot, start, stop, -1)]))
     assert (ghost.per_sample()[start:stop, slot] == -1).all()
     moved = int(lab.label[i]) - m
-    other = label_take(apart.take, han19, constraints=[Constraint(slot, start, stop, moved)])
+    other = label_take(apart.take, han19, corrections=Corrections(constraints=[Constraint(slot, start, stop, moved)]))
     assert (other.per_sample()[start:stop, slot] == moved).all()
     assert other.info["hands"]["sides"] == ["left", "right"]
 
@@ -199,13 +204,13 @@ def test_named_body_points_stay_out_of_the_hands(han19, apart):
     named = replace(take, names=names)
     per = label_take(named, han19).per_sample()
     assert (per[:, real] == -1).all()  # kept out of the hands: null, never a label
-    offered = label_take(named, han19, keep_named=False).per_sample()
+    offered = label_take(named, han19, LabelSettings(keep_named=False)).per_sample()
     assert (offered[:, real] >= 0).mean() > 0.9  # offered, they are the markers they are
 
 
 @pytest.mark.parametrize("naming", ["prefix", "suffix", "vicon", "{side}_{name}"])
 def test_names_round_trip_through_c3d(han19, apart, tmp_path, naming):
-    lab = label_take(apart.take, han19, naming=naming)
+    lab = label_take(apart.take, han19, LabelSettings(naming=naming))
     path = tmp_path / "labeled.c3d"
     write_c3d(labeled_take(apart.take, lab), path)
     back = read_take(path)

@@ -8,6 +8,7 @@ from mocap_autolabel.core.hand.ik import GATE
 from mocap_autolabel.core.labeling import NULL, Constraint, Labeling
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.settings import Corrections, LabelSettings
 from mocap_autolabel.core.synth.generate import GHOST, synthesize
 from mocap_autolabel.core.validate import DOWNGRADED, downgrade, fit_scores
 
@@ -48,8 +49,8 @@ def test_validation_keeps_accuracy_and_constraints(take_and_truth):
     t = np.where(truth == GHOST, NULL, truth)
     slot = int(np.flatnonzero(take.valid[100])[0])
     constraint = Constraint(slot, 100, 140, NULL)
-    plain = label_take(take, layout, constraints=[constraint])
-    checked = label_take(take, layout, validate=True, constraints=[constraint])
+    plain = label_take(take, layout, corrections=Corrections(constraints=[constraint]))
+    checked = label_take(take, layout, LabelSettings(validate=True), corrections=Corrections(constraints=[constraint]))
     v = take.valid
     acc_plain = (plain.per_sample()[v] == t[v]).mean()
     acc_checked = (checked.per_sample()[v] == t[v]).mean()
@@ -63,4 +64,4 @@ def test_validation_keeps_accuracy_and_constraints(take_and_truth):
 
 def test_validation_needs_vote(take_and_truth):
     with pytest.raises(ValueError, match="vote"):
-        label_take(take_and_truth[0], load_layout("han19"), temporal="none", validate=True)
+        label_take(take_and_truth[0], load_layout("han19"), LabelSettings(temporal="none", validate=True))

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint
 from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.settings import Corrections, LabelSettings
 from mocap_autolabel.core.synth.generate import synthesize
 from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take
 from mocap_autolabel.core.take import Take
@@ -40,8 +41,8 @@ def _check_segments(lab, take):
 
 
 def test_windows_label_a_one_hand_take_as_the_whole_does(han19, one_hand):
-    whole = label_take(one_hand.take, han19, window=None)
-    windows = label_take(one_hand.take, han19, window=500)
+    whole = label_take(one_hand.take, han19, LabelSettings(window=None))
+    windows = label_take(one_hand.take, han19, LabelSettings(window=500))
     assert len(windows.info["windows"]) >= 3
     assert windows.names == whole.names == list(han19.names)
     _check_segments(windows, one_hand.take)
@@ -54,14 +55,14 @@ def test_windows_label_a_one_hand_take_as_the_whole_does(han19, one_hand):
 
 def test_a_constraint_across_a_cut_holds_in_every_window(han19, one_hand):
     take = one_hand.take
-    first = label_take(take, han19, window=500)
+    first = label_take(take, han19, LabelSettings(window=500))
     cut = first.info["windows"][1]["cut"]
     # The longest trajectory through the first cut, locked to a label it did not get.
     through = np.flatnonzero((first.start < cut) & (first.stop > cut))
     seg = through[np.argmax(first.stop[through] - first.start[through])]
     wrong = (int(first.label[seg]) + 1) % len(han19) if first.label[seg] >= 0 else 0
     c = Constraint(int(first.slot[seg]), int(first.start[seg]), int(first.stop[seg]), wrong)
-    lab = label_take(take, han19, constraints=[c], window=500)
+    lab = label_take(take, han19, LabelSettings(window=500), corrections=Corrections(constraints=[c]))
     per = lab.per_sample()[c.start:c.stop, c.slot]
     assert (per[per != EMPTY] == wrong).all()
     assert lab.locked[(lab.slot == c.slot) & (lab.start < c.stop) & (lab.stop > c.start)].all()
@@ -75,7 +76,7 @@ def test_two_hands_in_windows_are_named_by_side_throughout(han19):
     positions[:600][left[:600]] = np.nan
     take = Take(positions, list(two.take.names), two.take.rate)
     truth = np.where(np.isnan(positions[..., 0]), -2, two.labels)
-    lab = label_take(take, han19, window=600)
+    lab = label_take(take, han19, LabelSettings(window=600))
     assert [w["hands"] for w in lab.info["windows"]][0] == 1 and lab.info["hands"]["count"] == 2
     assert lab.info["hands"]["sides"] == ["left", "right"] and lab.info["hands"]["naming"]
     assert lab.names[0] == "L_ThumbCMC" and lab.names[len(han19)] == "R_ThumbCMC"
@@ -95,12 +96,15 @@ def test_a_two_hand_re_solve_keeps_each_windows_sides(han19):
     from mocap_autolabel.core.hands import relabel_options
 
     two = two_hand_take(han19, 1500, seed=5, config=TwoHandConfig(close_share=0.0))
-    lab = label_take(two.take, han19, window=600)
+    lab = label_take(two.take, han19, LabelSettings(window=600))
     options = relabel_options(lab.info)
     assert options["hands"] == 2 and len(options["sides"]) == len(lab.info["windows"])
     seg = int(np.argmax(lab.length * (lab.label >= 0)))
     c = Constraint(int(lab.slot[seg]), int(lab.start[seg]), int(lab.stop[seg]), int(lab.label[seg]))
-    again = label_take(two.take, han19, constraints=[c], window=600, **options)
+    settings = LabelSettings(window=600, hand_count=options["hands"], sides=options["sides"],
+                             naming=options.get("naming"))
+    again = label_take(two.take, han19, settings,
+                       corrections=Corrections(constraints=[c], hand_swaps=options["hand_swaps"]))
     assert again.names == lab.names
     a, b = lab.per_sample(), again.per_sample()
     assert (a != b).mean() < 0.002
@@ -113,8 +117,8 @@ def test_the_label_command_labels_a_long_take_in_windows(han19, tmp_path):
 
     from mocap_autolabel.cli import main
     from mocap_autolabel.core.formats.c3d import write_c3d
+    from mocap_autolabel.core.settings import WINDOW_FRAMES
     from mocap_autolabel.core.take import read_take
-    from mocap_autolabel.core.windows import WINDOW_FRAMES
 
     synth = synthesize(han19, WINDOW_FRAMES + 1500, seed=9)
     src, out, report = tmp_path / "long.c3d", tmp_path / "long_labeled.c3d", tmp_path / "report.json"
@@ -157,8 +161,8 @@ def test_a_re_solve_labels_again_only_around_the_change(han19, long_one):
     seg = _middle_segment(lab, take.n_frames)
     wrong = (int(lab.label[seg]) + 1) % len(han19)
     c = Constraint(int(lab.slot[seg]), int(lab.start[seg]), int(lab.stop[seg]), wrong)
-    full = label_take(take, han19, constraints=[c])
-    local = label_take(take, han19, constraints=[c], previous=lab)
+    full = label_take(take, han19, corrections=Corrections(constraints=[c]))
+    local = label_take(take, han19, corrections=Corrections(constraints=[c]), previous=lab)
     (a, b), = local.info["relabeled"]
     assert 0 < a < c.start and c.stop < b < take.n_frames  # a stretch around the correction, not the take
     assert local.info["locks"] == [[c.slot, c.start, c.stop, wrong]]
@@ -185,8 +189,10 @@ def test_a_two_hand_re_solve_labels_again_around_the_change(han19):
     seg = _middle_segment(lab, two.take.n_frames)
     c = Constraint(int(lab.slot[seg]), int(lab.start[seg]), int(lab.stop[seg]), int(lab.label[seg]))
     options = relabel_options(lab.info)
-    full = label_take(two.take, han19, constraints=[c], **options)
-    local = label_take(two.take, han19, constraints=[c], previous=lab, **options)
+    settings = LabelSettings(hand_count=options["hands"], sides=options["sides"], naming=options.get("naming"))
+    corrections = Corrections(constraints=[c], hand_swaps=options["hand_swaps"])
+    full = label_take(two.take, han19, settings, corrections=corrections)
+    local = label_take(two.take, han19, settings, corrections=corrections, previous=lab)
     assert local.info["relabeled"] and local.names == lab.names
     assert (local.per_sample() == full.per_sample()).mean() > 0.999
     f, p = np.nonzero(local.per_sample() >= 0)

@@ -30,6 +30,7 @@ from mocap_autolabel.core.labelers.onnx_labeler import MODELS_DIR, load_card, sh
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import score_labeling, segments_right
 from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.settings import LabelSettings
 from mocap_autolabel.core.synth.generate import SynthConfig, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take
 from mocap_autolabel.core.temporal.confidence import (
@@ -140,8 +141,8 @@ def vote_shares(data: list, layout, method: str, labelers: list, grid: list[dict
     for setting in grid:
         total = dict.fromkeys(("correct", "instances", "frames_all_correct", "frames"), 0)
         for (take, truth, _), labeler in zip(data, labelers):
-            labeling = label_take(take, layout, method=method, temporal="vote", labeler=labeler, calibrate=False,
-                                  **{**fixed, **setting})
+            settings = LabelSettings(method=method, temporal="vote", calibrate_confidence=False, **{**fixed, **setting})
+            labeling = label_take(take, layout, settings, labeler=labeler)
             s = score_labeling(labeling.per_sample(), truth, take.valid, len(layout)).as_dict()
             for key in total:
                 total[key] += s[key]
@@ -304,13 +305,15 @@ def main(argv: list[str] | None = None) -> int:
                 partner = load_partner(donor, temporal, name, args.out)
                 continuity = load_continuity(donor, temporal, name, args.out)
             for (take, truth, markers), labeler in zip(data, labelers):
-                options = {"null_prior": (prior, 0.0), "switch_cost": (0.0, switch), "partner": partner,
-                           "continuity": continuity, "labeler": labeler}
+                settings = LabelSettings(method=method, temporal=temporal, calibrate_confidence=False,
+                                         null_prior=(prior, 0.0), switch_cost=(0.0, switch), partner=partner,
+                                         continuity=continuity)
+                options = {"labeler": labeler}
                 if method == "gmm":
                     options["labeler"] = GmmLabeler(layout).fit(markers[:FIT_FRAMES])
                 if method == "nearest":
                     options["start"] = markers[FIT_FRAMES]
-                labeling = label_take(take, layout, method=method, temporal=temporal, calibrate=False, **options)
+                labeling = label_take(take, layout, settings, **options)
                 seg.append(segment_outcomes(labeling, take, truth))
             seg = np.concatenate(seg)
             source = f"{len(data)} synthetic takes of {MIN_FRAMES}-{args.frames} frames, seeds {SEED0}+"

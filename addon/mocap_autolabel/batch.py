@@ -26,6 +26,8 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 
+from .core.cache import RunCache
+from .core.settings import LabelSettings
 from .worker_env import environ, thread_caps
 
 TAKE_EXTENSIONS = (".c3d", ".trc", ".tsv")
@@ -36,7 +38,8 @@ class BatchSettings:
     """Everything a batch run can be told; a TOML file holds the same keys (``[batch]`` table).
 
     Attributes:
-        layout: built-in layout name or a layout .toml.
+        layout: built-in layout name or a layout .toml; None: picked per take from its points' names
+            (:func:`.core.process.choose_layout`), else han19.
         model: ONNX model for the labeler (default: the shipped one).
         method, temporal: labeling method and temporal mode (as the ``label`` command).
         validate: IK validation of the labels.
@@ -59,7 +62,7 @@ class BatchSettings:
             ``max_gap`` seconds; the report's ``fill`` holds every gap.
     """
 
-    layout: str = "han19"
+    layout: str | None = None
     model: str | None = None
     method: str = "set"
     temporal: str = "vote"
@@ -115,6 +118,23 @@ class BatchSettings:
 
     def needs_blender(self) -> bool:
         return self.blend or self.fbx or self.bvh
+
+    def label_settings(self, **more) -> LabelSettings:
+        """The :class:`.core.settings.LabelSettings` of these batch settings (``more``: fields to add)."""
+        return LabelSettings(method=self.method, temporal=self.temporal, model=self.model, validate=self.validate,
+                             hand_count=self.hands, naming=self.hand_names, **more)
+
+
+#: This process's results kept between its takes (loaded models, fitted range-of-motion labelers):
+#: one per batch worker, gone with it.
+_WORKER_CACHE: list[RunCache] = []
+
+
+def run_cache() -> RunCache:
+    """The batch worker's :class:`.core.cache.RunCache` (made on its first take)."""
+    if not _WORKER_CACHE:
+        _WORKER_CACHE.append(RunCache())
+    return _WORKER_CACHE[0]
 
 
 def find_takes(inputs: list[str]) -> list[tuple[str, str]]:
@@ -236,17 +256,15 @@ def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) ->
 
 def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: dict) -> dict:
 
-    from .core.errors import MocapInputError
     from .core.formats.c3d import write_c3d
-    from .core.hands import HandNaming
-    from .core.labeling import labeled_take, unlabeled_point_names
+    from .core.labeling import unlabeled_point_names
     from .core.layout import load_layout
-    from .core.pipeline import hand_checks, label_take, layout_doubt, solve_hands, time_limit_warning
+    from .core.process import Outputs, choose_layout, process_take
     from .core.take import read_take
 
     t = time.perf_counter()
-    layout = load_layout(settings.layout)
     take = read_take(path)
+    layout = load_layout(choose_layout(take, settings.layout))
     timings["read"] = round(time.perf_counter() - t, 4)
     calibrations = {}
     if settings.calibration:
@@ -256,21 +274,17 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
             cal = Calibration.load(file)
             cal.check(layout, file)
             calibrations[cal.side] = cal
-    naming = HandNaming(settings.hand_names) if settings.hand_names else None
-    t = time.perf_counter()
     one_cal = next(iter(calibrations.values())) if len(calibrations) == 1 else None
-    labeling = label_take(take, layout, method=settings.method, temporal=settings.temporal, model=settings.model,
-                          validate=settings.validate, hand=one_cal, hands=settings.hands, naming=naming)
-    timings["label"] = round(time.perf_counter() - t, 4)
-    labeled = labeled_take(take, labeling)
+    outputs = Outputs(solve=settings.solve_hand or settings.needs_blender(),
+                      fill=settings.fill_method if settings.fill else None, max_gap=settings.max_gap,
+                      calibrations={**calibrations, "": one_cal} if one_cal is not None else calibrations or None,
+                      confident=settings.confident)
+    result = process_take(take, layout, settings.label_settings(validate_hand=one_cal), outputs,
+                          cache=run_cache())
+    labeling, labeled, checks, solved = result.labeling, result.labeled, result.checks, result.solves
+    timings.update(result.seconds)
     facts = labeling.info["hands"]
     two = facts["count"] == 2
-    doubt = None if two else layout_doubt(take, layout, labeling, settings.confident)
-    checks = hand_checks(take, layout, labeling, doubt)
-    if not any(check.found for _, check in checks):
-        hint = facts.get("warning")  # a take of two hands that never come apart
-        raise MocapInputError(path, "; ".join([f"{side} hand: {check}" if side else str(check)
-                                               for side, check in checks] + ([hint] if hint else [])))
     out = {"layout": layout.name, "frames": take.n_frames, "points": take.n_points, "rate": take.rate,
            "hand_frames": round(max(check.share for _, check in checks), 4), "hands": facts["count"],
            "summary": labeling.summary(settings.confident, take.first_frame,
@@ -287,29 +301,11 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
                                     "confident_share": round(summary["confident_share"], 4),
                                     "uncertain_segments": len(summary["uncertain_segments"])})
         out["sides_confidence"] = facts.get("confidence")
-    said = [str(w) for w in (doubt, time_limit_warning(labeling)) if w]
-    said += [f"{side} hand: {check}" for side, check in checks if not check.found]
-    if facts.get("forced") == 2:
-        said.append("two hands were forced, one was found")
-    if facts.get("warning"):
-        said.append(facts["warning"])
-    if said:
-        out["warning"] = "; ".join(said)
-    solved = None
-    if settings.solve_hand or settings.needs_blender() or settings.fill and settings.fill_method in ("auto", "hand"):
-        t = time.perf_counter()
-        solved = solve_hands(labeled, layout, naming, calibrations if two else
-                             ({"": one_cal} if one_cal is not None else None))
-        timings["solve"] = round(time.perf_counter() - t, 4)
-    written = labeled
-    if settings.fill:
-        from .core.fill import fill_gaps
-
-        t = time.perf_counter()
-        filled = fill_gaps(labeled, layout, settings.fill_method, settings.max_gap, solves=solved, naming=naming)
-        written = filled.take
-        out["fill"] = filled.report()
-        timings["fill"] = round(time.perf_counter() - t, 4)
+    if result.warnings:
+        out["warning"] = "; ".join(result.warnings)
+    written = result.output_take
+    if result.filled is not None:
+        out["fill"] = result.filled.report()
     t = time.perf_counter()
     target = os.path.join(out_dir, name + ".labeled.c3d")
     write_c3d(written, target)

@@ -12,7 +12,6 @@ import importlib.util
 import json
 import os
 import sys
-from dataclasses import asdict
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
@@ -318,7 +317,7 @@ def _hand_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _hand_options(args) -> dict:
-    """label_take's hand keywords from --hands / --sides / --hand-names (ValueError on a bad value)."""
+    """The settings' hand fields from --hands / --sides / --hand-names (ValueError on a bad value)."""
     from .core.hands import SIDES, HandNaming
 
     sides = None
@@ -326,8 +325,23 @@ def _hand_options(args) -> dict:
         sides = [v.strip().lower() for v in args.sides.split(",")]
         if any(v not in SIDES for v in sides):
             raise ValueError(f"--sides takes left/right per hand, got {args.sides!r}")
-    return {"hands": args.hands, "sides": sides,
-            "naming": HandNaming(args.hand_names) if args.hand_names else None}
+    if args.hand_names:
+        HandNaming(args.hand_names)  # a bad pattern: its one-line error
+    return {"hand_count": args.hands, "sides": sides, "naming": args.hand_names or None}
+
+
+def _label_settings(args, layout):
+    """The :class:`.core.settings.LabelSettings` of ``label``'s flags."""
+    from .core.hand.calibrate import Calibration
+    from .core.settings import LabelSettings
+
+    hand = None
+    if args.calibration:
+        hand = Calibration.load(args.calibration)
+        hand.check(layout, args.calibration)
+    return LabelSettings(method=args.method, temporal=args.temporal, model=args.model, vote_score=args.vote,
+                         power_p=args.p, power_q=args.q, n_best=args.n_best, validate=args.validate,
+                         validate_hand=hand, **_hand_options(args))
 
 
 def _hands_line(labeling, first_frame: int = 0, confident: float = 0.95) -> str | None:
@@ -519,10 +533,11 @@ def _label(args) -> int:
     import numpy as np
 
     from .core.atomic import atomic_output
-    from .core.errors import MocapInputError
-    from .core.labeling import labeled_take, layout_markers, unlabeled_point_names
+    from .core.checks import time_limit_warning
+    from .core.labelers import labeler_method
+    from .core.labeling import layout_markers, unlabeled_point_names
     from .core.layout import load_layout
-    from .core.pipeline import hand_checks, label_take, layout_doubt, time_limit_warning
+    from .core.process import Outputs, process_take
     from .core.quiet import silenced_stdout
     from .core.synth.generate import load_truth, truth_path
     from .core.take import read_take
@@ -564,55 +579,21 @@ def _label(args) -> int:
         bar(f"reading {args.file}")
         take = read_take(args.file)
         labeled = layout_markers(read_take(args.fit), layout) if args.fit else None
-        hand = None
-        if args.calibration:
-            from .core.hand.calibrate import Calibration
-
-            hand = Calibration.load(args.calibration)
-            hand.check(layout, args.calibration)
-        labeling = label_take(take, layout, method=args.method, temporal=args.temporal, model=args.model,
-                              score=args.vote, p=args.p, q=args.q, n_best=args.n_best,
-                              validate=args.validate, hand=hand, **_hand_options(args),
-                              fit=labeled if args.method == "gmm" else None,
-                              start=labeled[0] if (labeled is not None and args.method == "nearest") else None,
-                              progress=bar, done=bar.share)
-        bar("checking the layout and the hand", 1.0)
-        two = labeling.info["hands"]["count"] == 2
-        doubt = None if two else layout_doubt(take, layout, labeling)
-        checks = hand_checks(take, layout, labeling, doubt)
-        if not any(check.found for _, check in checks):  # batch's rule: labels on a body capture are no hand
-            hint = labeling.info["hands"].get("warning")  # a take of two hands that never come apart
-            raise MocapInputError(args.file, "; ".join([f"{side} hand: {check}" if side else str(check)
-                                                        for side, check in checks] + ([hint] if hint else [])))
-        missed = [f"{side} hand: {check}" for side, check in checks if not check.found]
-        if doubt:
-            labeling.info["layout_doubt"] = asdict(doubt)  # in the report, and in the review scene's panel
-        solved = None
-        if args.solve_hand or args.fill and args.fill_method in ("auto", "hand"):
-            from .core.hands import HandNaming
-            from .core.pipeline import solve_hands
-
-            bar.stage("solving the hand" if labeling.info["hands"]["count"] == 1 else "solving both hands")
-            naming = labeling.info["hands"].get("naming")
-            # [(side, HandSolve)]: one rig per hand ("" for a plain one-hand take).
-            solved = solve_hands(labeled_take(take, labeling), layout, HandNaming(naming) if naming else None,
-                                 **_solve_progress(bar))
-        filled = None
-        if args.fill:
-            from .core.fill import fill_gaps
-            from .core.hands import HandNaming
-
-            bar("filling gaps")
-            naming = labeling.info["hands"].get("naming")
-            filled = fill_gaps(labeled_take(take, labeling), layout, args.fill_method, args.max_gap, solves=solved,
-                               naming=HandNaming(naming) if naming else None)
+        method = labeler_method(args.method)
+        outputs = Outputs(solve=args.solve_hand, fill=args.fill_method if args.fill else None,
+                          max_gap=args.max_gap)
+        result = process_take(take, layout, _label_settings(args, layout), outputs,
+                              fit=labeled if labeled is not None and method.fits_performer else None,
+                              start=labeled[0] if labeled is not None and method.starts_from_frame else None,
+                              progress=bar)
+        labeling, doubt = result.labeling, result.doubt
+        missed = [f"{side} hand: {check}" for side, check in result.checks if not check.found]
         if args.output:
             from .core.formats.c3d import write_c3d
 
             bar(f"writing {args.output}")
-            write_c3d(filled.take if filled else labeled_take(take, labeling), args.output)
-        if solved is not None:  # one HandSolve for a plain one-hand take, else one per hand
-            solved = (solved[0][1] if [side for side, _ in solved] == [""] else solved) if args.solve_hand else None
+            write_c3d(result.output_take, args.output)
+        filled, solved = result.filled, result.rig() if args.solve_hand else None
         if args.blend:
             from .blender.export import write_review_scene
 
@@ -639,7 +620,7 @@ def _label(args) -> int:
               f"{prop['frames'][1] - 1}) took hand labels: kept out of the hands, its points left unlabeled")
     for line in missed:
         print(f"  warning  {line}")
-    if args.method == "gmm" and not args.fit:
+    if labeler_method(args.method).fits_performer and not args.fit:
         print(f"  note     gmm fitted on the {layout.name} synthetic range of motion: give --fit LABELED, a labeled "
               f"take of the performer, for a fit to their hand")
     if labeling.info.get("never_confident"):
@@ -719,7 +700,7 @@ def _solve_progress(bar: _ProgressBar) -> dict:
     """``solve_take``'s progress argument where it has one (stage and share done, 0 to 1)."""
     import inspect
 
-    from .core.pipeline import solve_take
+    from .core.solve import solve_take
 
     return {"progress": bar} if "progress" in inspect.signature(solve_take).parameters else {}
 
@@ -729,7 +710,7 @@ def _solve(args) -> int:
     from .core.hand.calibrate import Calibration
     from .core.hands import HandNaming, labeled_layout, sided_path, split_hands
     from .core.layout import load_layout
-    from .core.pipeline import solve_hands
+    from .core.solve import solve_hands
     from .core.take import read_take
 
     outputs = (("--blend", args.blend, ".blend"), ("--fbx", args.fbx, ".fbx"), ("--bvh", args.bvh, ".bvh"))
@@ -824,7 +805,7 @@ def _solve(args) -> int:
 
 def _fill(args) -> int:
     from .core.errors import MocapInputError
-    from .core.fill import fill_gaps
+    from .core.fill import fill_gaps, fill_method
     from .core.formats.c3d import write_c3d
     from .core.hand.calibrate import Calibration
     from .core.hands import HandNaming, labeled_layout, split_hands
@@ -846,7 +827,7 @@ def _fill(args) -> int:
             calibrations["" if sides == [""] else cal.side] = cal
         if len(calibrations) > len(sides):
             raise MocapInputError(args.calibration, f"give one calibration per hand ({len(sides)} in the take)")
-        if args.fill_method in ("auto", "hand"):
+        if fill_method(args.fill_method).uses_hand:
             bar.stage("calibrating and solving the hand" if len(calibrations) < len(sides) else "solving the hand")
         else:
             bar.stage("filling gaps")
@@ -939,7 +920,8 @@ def _batch(args) -> int:
     try:
         from .core.layout import load_layout
 
-        load_layout(settings.layout)
+        if settings.layout:
+            load_layout(settings.layout)
     except Exception as exc:
         return _fail(settings.layout, exc)
     missing = [i for i in args.inputs if not any(ch in i for ch in "*?[") and not os.path.exists(i)]

@@ -41,6 +41,7 @@ from __future__ import annotations
 import functools
 import time
 from dataclasses import dataclass, field, replace
+from typing import ClassVar
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -50,10 +51,71 @@ from .hand.ik import HandSolver
 from .hand.skeleton import POSE_LIMITS
 from .layout import Layout
 from .rotations import kabsch
+from .solve import solve_hands
 from .take import Take
 from .tracklets import mask_runs
 
-METHODS = ("auto", "spline", "rigid", "hand", "pca", "pose")
+
+class FillMethod:
+    """A fill method of the registry: capabilities as class attributes.
+
+    Attributes:
+        name: the method's name (``--fill-method``, the panel).
+        uses_hand: fills from the solved hand: the hand is solved before the fill.
+        tries: the models it tries per gap, best expected error first (``auto`` tries several).
+    """
+
+    name: ClassVar[str]
+    uses_hand: ClassVar[bool] = False
+    tries: ClassVar[tuple[str, ...]]
+
+
+class AutoFill(FillMethod):
+    """Per gap, the model of least expected error among the hand, the pose and the spline."""
+
+    name = "auto"
+    uses_hand = True
+    tries = ("hand", "pose", "spline")
+
+
+class SplineMethod(FillMethod):
+    name, tries = "spline", ("spline",)
+
+
+class RigidMethod(FillMethod):
+    name, tries = "rigid", ("rigid",)
+
+
+class HandMethod(FillMethod):
+    name, uses_hand, tries = "hand", True, ("hand",)
+
+
+class PCAMethod(FillMethod):
+    name, tries = "pca", ("pca",)
+
+
+class PoseMethod(FillMethod):
+    name, tries = "pose", ("pose",)
+
+
+#: The fill methods by name; the first is the default.
+FILL_METHODS: dict[str, type[FillMethod]] = {m.name: m for m in (AutoFill, SplineMethod, RigidMethod, HandMethod,
+                                                                 PCAMethod, PoseMethod)}
+METHODS = tuple(FILL_METHODS)
+
+
+def fill_method(name: str) -> type[FillMethod]:
+    """The registry's class for ``name``; a ValueError naming the choices for an unknown one."""
+    try:
+        return FILL_METHODS[name]
+    except KeyError:
+        raise ValueError(f"unknown fill method {name!r}; choose one of {', '.join(FILL_METHODS)}") from None
+
+
+class NoFill(Exception):
+    """A model cannot fill a gap; ``str()`` says why."""
+
+
 #: Seconds: longer gaps are left open unless told otherwise.
 MAX_GAP = 1.0
 #: Samples each side of a gap that its spline passes through.
@@ -78,7 +140,7 @@ TESTS = 8
 #: the error between them interpolated: it changes smoothly across a gap).
 TEST_POINTS = 16
 #: Order in which ``auto`` prefers methods of equal expected error.
-PREFERENCE = ("hand", "pose", "spline")
+PREFERENCE = AutoFill.tries
 #: Seconds each side of a gap whose frames a pose fill learns from (on the real glove recording,
 #: median error of 0.25-2 s gaps: 0.53 mm learning from 1 s, 0.40 mm from 5 s, 0.37 mm from 10 s).
 POSE_WINDOW = 5.0
@@ -751,8 +813,9 @@ def _plan(model: _Model, m: int, valid: np.ndarray, start: int, stop: int,
 
 
 def _model_fill(model: _Model, m: int, x: np.ndarray, valid: np.ndarray, start: int, stop: int,
-                rate: float) -> tuple[np.ndarray, np.ndarray] | str:
-    """A model's fill ``(n, 3)`` of the gap and its expected error ``(n,)``, or why it has none.
+                rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """A model's fill ``(n, 3)`` of the gap and its expected error ``(n,)``; :class:`NoFill` says
+    why it has none.
 
     The expected error per sample: how far the model's offset from the marker strays from its
     blend between the ends over gaps of the same length hidden near this one (RMS; a rigid or PCA
@@ -762,7 +825,7 @@ def _model_fill(model: _Model, m: int, x: np.ndarray, valid: np.ndarray, start: 
     n = stop - start
     ok = model.available(m)
     if not ok[start:stop].all():
-        return "no model in every frame of the gap"
+        raise NoFill("no model in every frame of the gap")
     around, c, inside, windows = _plan(model, m, valid, start, stop, rate)
     k = SLOPE_SAMPLES
     pred = model.predict(m, around, start, stop)
@@ -774,7 +837,7 @@ def _model_fill(model: _Model, m: int, x: np.ndarray, valid: np.ndarray, start: 
         pred = _smooth(pred, SMOOTH_FRAMES)
     inner = pred[k:k + n]
     if not np.isfinite(inner).all():
-        return "no model in every frame of the gap"
+        raise NoFill("no model in every frame of the gap")
     before, after = pred[:k], pred[k + n:2 * k + n]
     before, after = _carried_out(inner, before, after)
     corr, da, db = _end_correction(x, inner, (before[-1], after[0]), before, after, valid, start, stop, rate)
@@ -812,8 +875,7 @@ def fill_markers(markers: np.ndarray, rate: float, method: str = "auto", max_gap
     Returns:
         :class:`Filled`; observed samples are copied unchanged.
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    wanted = fill_method(method).tries
     markers = np.asarray(markers, dtype=float)
     n_f, n_m, _ = markers.shape
     names = names or [str(i) for i in range(n_m)]
@@ -821,7 +883,6 @@ def fill_markers(markers: np.ndarray, rate: float, method: str = "auto", max_gap
     out = markers.copy()
     filled = np.zeros((n_f, n_m), dtype=bool)
     error = np.full((n_f, n_m), np.nan)
-    wanted = PREFERENCE if method == "auto" else (method,)
     models: dict[str, _Model | str] = {
         "hand": HandFill(solver, poses, markers, rate) if solver is not None and poses is not None else "no hand solve",
         "rigid": RigidFill(markers, partners, rate) if partners is not None else "no rigid partners given",
@@ -837,24 +898,14 @@ def fill_markers(markers: np.ndarray, rate: float, method: str = "auto", max_gap
         gap.reason = _left_open(start, stop, n_f, rate, max_gap)
         if gap.reason:
             continue
-        x = markers[:, m]
         best, why = None, []
         for name in wanted:
-            if name == "spline":
-                got = spline_fill(x, valid[:, m], start, stop), spline_error(x, valid[:, m], start, stop, rate)
-            else:
-                if name not in models:  # pca and pose: made when a gap first asks
-                    models[name] = PCAFill(markers) if name == "pca" else PoseFill(markers, rate)
-                model = models[name]
-                if isinstance(model, str):
-                    got = model
-                elif name == "rigid" and len(partners[m]) < MIN_PARTNERS:
-                    got = f"fewer than {MIN_PARTNERS} rigid partners"
-                else:
-                    got = _model_fill(model, m, x, valid[:, m], start, stop, rate)
-            if isinstance(got, str):
-                why.append(f"{name}: {got}" if method == "auto" else got)
-            elif best is None or got[1].mean() < best[2].mean():
+            try:
+                got = _fill_with(name, models, markers, m, valid, start, stop, rate, partners)
+            except NoFill as exc:
+                why.append(f"{name}: {exc}" if len(wanted) > 1 else str(exc))
+                continue
+            if best is None or got[1].mean() < best[2].mean():
                 best = (name, *got)
         if best is None:
             gap.reason = "; ".join(dict.fromkeys(why))
@@ -865,6 +916,24 @@ def fill_markers(markers: np.ndarray, rate: float, method: str = "auto", max_gap
         error[start:stop, m] = err
         gap.error, gap.max_error = float(err.mean()), float(err.max())
     return Filled(out, filled, error, gaps)
+
+
+def _fill_with(name: str, models: dict, markers: np.ndarray, m: int, valid: np.ndarray, start: int, stop: int,
+               rate: float, partners) -> tuple[np.ndarray, np.ndarray]:
+    """Gap ``[start, stop)`` of marker ``m`` filled by model ``name`` and its expected error;
+    :class:`NoFill` where the model cannot fill it (``models`` holds the take's models, or why
+    there is none, made when a gap first asks)."""
+    x = markers[:, m]
+    if name == "spline":
+        return spline_fill(x, valid[:, m], start, stop), spline_error(x, valid[:, m], start, stop, rate)
+    if name not in models:
+        models[name] = PCAFill(markers) if name == "pca" else PoseFill(markers, rate)
+    model = models[name]
+    if isinstance(model, str):
+        raise NoFill(model)
+    if name == "rigid" and len(partners[m]) < MIN_PARTNERS:
+        raise NoFill(f"fewer than {MIN_PARTNERS} rigid partners")
+    return _model_fill(model, m, x, valid[:, m], start, stop, rate)
 
 
 def _left_open(start: int, stop: int, frames: int, rate: float, max_gap: float) -> str:
@@ -902,6 +971,7 @@ class TakeFill:
         gaps: every gap of every hand's markers, filled or left open (``marker`` = point slot).
         method, max_gap: as asked.
         seconds: wall time of the solve (when done here) and of the fill.
+        solves: ``[(side, HandSolve)]`` the fill used (solved here where none was given), or None.
     """
 
     take: Take
@@ -909,6 +979,7 @@ class TakeFill:
     method: str
     max_gap: float
     seconds: dict
+    solves: list | None = None
 
     def report(self) -> dict:
         """A JSON-ready report: counts, every gap (marker, frames, method, expected error, or why open)."""
@@ -936,26 +1007,24 @@ def fill_gaps(take: Take, layout: Layout, method: str = "auto", max_gap: float =
         layout: its marker layout.
         method: one of :data:`METHODS`.
         max_gap: seconds; longer gaps are left open.
-        solves: ``[(side, HandSolve)]`` as :func:`.pipeline.solve_hands` gives for this take; None
+        solves: ``[(side, HandSolve)]`` as :func:`.solve.solve_hands` gives for this take; None
             solves here when the method may use the hand (``hand``, ``auto``); ``[]``: no hand.
         naming: how two hands' names carry their side (:class:`.hands.HandNaming`).
-        solve_options: passed to :func:`.pipeline.solve_hands` when solving here.
+        solve_options: passed to :func:`.solve.solve_hands` when solving here.
 
     Raises:
         MocapInputError: the take is not labeled with ``layout``; or a bad ``method`` / ``max_gap``.
     """
     from .hands import hands_in_names, split_hands
 
-    if method not in METHODS:
-        raise MocapInputError(take.source, f"unknown fill method {method!r} (one of {', '.join(METHODS)})")
+    if method not in FILL_METHODS:
+        raise MocapInputError(take.source, f"unknown fill method {method!r} (one of {', '.join(FILL_METHODS)})")
     if not max_gap > 0:
         raise MocapInputError(take.source, f"max_gap must be positive seconds, got {max_gap}")
     split_hands(take, layout, naming)  # a take that is not labeled with the layout: one clear error
     found = hands_in_names(take.names, layout, naming)
     seconds = {}
-    if solves is None and method in ("hand", "auto"):
-        from .pipeline import solve_hands
-
+    if solves is None and fill_method(method).uses_hand:
         t0 = time.perf_counter()
         solves = solve_hands(take, layout, naming, **solve_options)
         seconds["solve"] = round(time.perf_counter() - t0, 4)
@@ -981,4 +1050,4 @@ def fill_gaps(take: Take, layout: Layout, method: str = "auto", max_gap: float =
         residuals = np.where(was & ~take.valid, 0.0, residuals).astype(residuals.dtype)
     out = replace(take, positions=positions.astype(take.positions.dtype), residuals=residuals, filled=was,
                   warnings=list(take.warnings))
-    return TakeFill(out, gaps, method, max_gap, seconds)
+    return TakeFill(out, gaps, method, max_gap, seconds, solves)

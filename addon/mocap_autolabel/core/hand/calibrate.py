@@ -208,170 +208,269 @@ def calibrate(observed: np.ndarray, layout: Layout, side: str | None = None, han
     side = side or detect_side(observed, layout, hand)
     hand = HandModel(hand.length, hand.breadth, side)
     placed, normals = layout.place(hand)
+    picked, poses = _varied_frames(observed, hand, placed, frames, tick)
+    pinned = np.zeros(len(picked), dtype=bool)
+    if reference is not None and len(reference):
+        picked, poses, pinned = _with_reference(observed, hand, placed, picked, poses, pinned, reference,
+                                                reference_pose)
+    digits = sorted({"thumb"} | {f for _, f in contacts}, key=DIGITS.index) if contacts else []
+    pairs = np.zeros((0, 3), dtype=int)  # (row in picked, thumb's pad, finger's pad)
+    if contacts:
+        picked, poses, pinned, pairs = _with_contacts(observed, hand, placed, picked, poses, pinned, contacts, digits)
+    fit = _Fit.over(observed[picked], layout, hand, normals, prior, digits, pairs, pinned, solve_size)
+    poses, size, offsets, pads, dropped, rms_before = _solve(fit, poses, rounds, iterations, contact_after, tick)
+    final = fit.model(size, offsets)
+    rms_after = float(np.sqrt(((final.markers(poses) - fit.obs0) ** 2 * fit.w).sum() / fit.seen.sum()))
+    contact = {d: [round(float(pads[2 * i]), 4), round(float(np.degrees(pads[2 * i + 1])), 2)]
+               for i, d in enumerate(digits)}
+    gap = float(np.linalg.norm(fit.gaps(poses, size, pads), axis=1).max()) if len(fit.pairs) else float("nan")
+    return Calibration(layout.name, list(layout.names), side, final.hand.length, final.hand.breadth, offsets,
+                       rms_before, rms_after, [int(f) for f in picked], contact, gap, dropped)
+
+
+def _varied_frames(observed: np.ndarray, hand: HandModel, placed: Binding, frames: int,
+                   tick: Callable[[float], None]) -> tuple[np.ndarray, np.ndarray]:
+    """At most ``frames`` well-seen frames of the most varied poses (0-based) and their poses, fitted
+    with the layout's markers on ``hand`` (the first third of the progress)."""
     candidates = _well_seen(observed)
     if len(candidates) > 60 * frames:  # plenty to choose varied poses from, at a bounded cost
         candidates = candidates[np.linspace(0, len(candidates) - 1, 60 * frames).astype(int)]
     first = HandSolver(hand, placed).solve(observed[candidates], progress=lambda done: tick(0.3 * done))
     ok = first.solved
     chosen = _diverse(first.poses[ok, 6:], frames)
-    picked, poses = candidates[ok][chosen], first.poses[ok][chosen]
-    pinned = np.zeros(len(picked), dtype=bool)
-    if reference is not None and len(reference):
-        ref = np.asarray(reference, dtype=int)
-        ref = ref[np.linspace(0, len(ref) - 1, min(5, len(ref))).astype(int)]
-        joints = CANONICAL_POSES["flat"] if reference_pose is None else np.asarray(reference_pose)
-        ref_solver = HandSolver(hand, placed)
-        ref_poses = ref_solver.cold_start(observed[ref])
-        ref_poses[:, 6:] = joints
-        ref_poses = _refine_global(ref_solver, ref_poses, observed[ref])
-        picked = np.concatenate([ref, picked])
-        poses = np.concatenate([ref_poses, poses])
-        pinned = np.concatenate([np.ones(len(ref), dtype=bool), pinned])
-    digits = sorted({"thumb"} | {f for _, f in contacts}, key=DIGITS.index) if contacts else []
-    pairs = np.zeros((0, 3), dtype=int)  # (row in picked, thumb's pad, finger's pad)
-    if contacts:
-        bad = [f for _, f in contacts if f not in FINGERS]
-        if bad:
-            raise ValueError(f"contacts name fingers {bad}; fingers are {', '.join(FINGERS)}")
-        frames_c = np.array([f for f, _ in contacts], dtype=int)
-        new = np.setdiff1d(frames_c, picked)
-        if len(new):
-            picked = np.concatenate([picked, new])
-            poses = np.concatenate([poses, HandSolver(hand, placed).cold_start(observed[new])])
-            pinned = np.concatenate([pinned, np.zeros(len(new), dtype=bool)])
-        row = {int(f): i for i, f in enumerate(picked)}
-        pairs = np.array([(row[int(f)], 0, digits.index(d)) for f, d in contacts], dtype=int)
-    obs = observed[picked]
-    seen = np.isfinite(obs).all(axis=-1)
-    w = seen[..., None].astype(float)
-    obs0 = np.where(seen[..., None], obs, 0.0)
-    k, m = len(obs), len(layout)
-    weight = prior * k
-    # Prior as a residual: sqrt(weight) * (sqrt(a_n) n n^T + sqrt(a_t) (I - n n^T)) d.
-    nn = normals[:, :, None] * normals[:, None, :]
-    prior_mat = np.sqrt(weight) * (np.sqrt(ALPHA_NORMAL) * nn + np.sqrt(ALPHA_TANGENT) * (np.eye(3) - nn))
+    return candidates[ok][chosen], first.poses[ok][chosen]
 
-    def sized(size: np.ndarray) -> HandModel:
-        return HandModel(float(hand.length * np.exp(size[0])), float(hand.breadth * np.exp(size[1])), side)
 
-    def model(size: np.ndarray, offsets: np.ndarray) -> HandSolver:
-        h = sized(size)
-        return HandSolver(h, layout.place(h)[0].moved(offsets))
+def _with_reference(observed: np.ndarray, hand: HandModel, placed: Binding, picked: np.ndarray, poses: np.ndarray,
+                    pinned: np.ndarray, reference: np.ndarray,
+                    reference_pose: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``picked``, ``poses`` and ``pinned`` with up to five frames of the known ``reference`` pose put
+    first, pinned to its joint angles (their global rotation and position fitted)."""
+    ref = np.asarray(reference, dtype=int)
+    ref = ref[np.linspace(0, len(ref) - 1, min(5, len(ref))).astype(int)]
+    joints = CANONICAL_POSES["flat"] if reference_pose is None else np.asarray(reference_pose)
+    ref_solver = HandSolver(hand, placed)
+    ref_poses = ref_solver.cold_start(observed[ref])
+    ref_poses[:, 6:] = joints
+    ref_poses = _refine_global(ref_solver, ref_poses, observed[ref])
+    picked = np.concatenate([ref, picked])
+    poses = np.concatenate([ref_poses, poses])
+    pinned = np.concatenate([np.ones(len(ref), dtype=bool), pinned])
+    return picked, poses, pinned
 
-    def gaps(p: np.ndarray, size: np.ndarray, pads: np.ndarray) -> np.ndarray:
+
+def _with_contacts(observed: np.ndarray, hand: HandModel, placed: Binding, picked: np.ndarray, poses: np.ndarray,
+                   pinned: np.ndarray, contacts: Sequence[tuple[int, str]],
+                   digits: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``picked``, ``poses`` and ``pinned`` with the pinch frames of ``contacts`` added (cold-started
+    poses), and the pairs ``(row in picked, thumb's pad, finger's pad)`` of each pinch."""
+    bad = [f for _, f in contacts if f not in FINGERS]
+    if bad:
+        raise ValueError(f"contacts name fingers {bad}; fingers are {', '.join(FINGERS)}")
+    frames_c = np.array([f for f, _ in contacts], dtype=int)
+    new = np.setdiff1d(frames_c, picked)
+    if len(new):
+        picked = np.concatenate([picked, new])
+        poses = np.concatenate([poses, HandSolver(hand, placed).cold_start(observed[new])])
+        pinned = np.concatenate([pinned, np.zeros(len(new), dtype=bool)])
+    row = {int(f): i for i, f in enumerate(picked)}
+    pairs = np.array([(row[int(f)], 0, digits.index(d)) for f, d in contacts], dtype=int)
+    return picked, poses, pinned, pairs
+
+
+@dataclass
+class _Fit:
+    """The calibration's least-squares problem over the ``K`` picked frames: their markers, the
+    offsets' prior, and the pinch contacts (``pairs``, which :func:`_solve` drops as it goes).
+
+    Unknowns, in this order: ``K`` poses, ``M`` offsets, the hand's log length and breadth (where
+    solved), each contact digit's pad (along, angle).
+    """
+
+    layout: Layout
+    hand: HandModel
+    obs: np.ndarray  # (K, M, 3) the picked frames' markers, NaN where missing
+    obs0: np.ndarray  # the same, 0 where missing
+    seen: np.ndarray  # bool (K, M)
+    w: np.ndarray  # (K, M, 1): 1 where seen
+    prior_mat: np.ndarray  # (M, 3, 3): the offsets' prior as a residual
+    digits: list[str]
+    pairs: np.ndarray
+    pinned: np.ndarray  # bool (K,): frames of a known pose keep their joint angles
+    n_size: int
+
+    @classmethod
+    def over(cls, obs: np.ndarray, layout: Layout, hand: HandModel, normals: np.ndarray, prior: float,
+             digits: list[str], pairs: np.ndarray, pinned: np.ndarray, solve_size: bool) -> _Fit:
+        seen = np.isfinite(obs).all(axis=-1)
+        w = seen[..., None].astype(float)
+        obs0 = np.where(seen[..., None], obs, 0.0)
+        weight = prior * len(obs)
+        # Prior as a residual: sqrt(weight) * (sqrt(a_n) n n^T + sqrt(a_t) (I - n n^T)) d.
+        nn = normals[:, :, None] * normals[:, None, :]
+        prior_mat = np.sqrt(weight) * (np.sqrt(ALPHA_NORMAL) * nn + np.sqrt(ALPHA_TANGENT) * (np.eye(3) - nn))
+        return cls(layout, hand, obs, obs0, seen, w, prior_mat, digits, pairs, pinned, 2 if solve_size else 0)
+
+    @property
+    def k(self) -> int:
+        return len(self.obs)
+
+    @property
+    def m(self) -> int:
+        return len(self.layout)
+
+    @property
+    def n_pose(self) -> int:
+        return self.k * N_DOF
+
+    @property
+    def n_pad(self) -> int:
+        return 2 * len(self.digits)
+
+    @property
+    def n_par(self) -> int:
+        return self.n_pose + 3 * self.m + self.n_size + self.n_pad
+
+    def sized(self, size: np.ndarray) -> HandModel:
+        hand = self.hand
+        return HandModel(float(hand.length * np.exp(size[0])), float(hand.breadth * np.exp(size[1])), hand.side)
+
+    def model(self, size: np.ndarray, offsets: np.ndarray) -> HandSolver:
+        h = self.sized(size)
+        return HandSolver(h, self.layout.place(h)[0].moved(offsets))
+
+    def gaps(self, p: np.ndarray, size: np.ndarray, pads: np.ndarray) -> np.ndarray:
         """``(C, 3)`` thumb pad minus finger pad in each pinch frame, metres."""
-        h = sized(size)
-        at = HandSolver(h, _pads(h, digits, pads)).markers(p[pairs[:, 0]])
+        pairs = self.pairs
+        h = self.sized(size)
+        at = HandSolver(h, _pads(h, self.digits, pads)).markers(p[pairs[:, 0]])
         return at[np.arange(len(pairs)), pairs[:, 1]] - at[np.arange(len(pairs)), pairs[:, 2]]
 
-    def residuals(p: np.ndarray, size: np.ndarray, offsets: np.ndarray, pads: np.ndarray,
+    def residuals(self, p: np.ndarray, size: np.ndarray, offsets: np.ndarray, pads: np.ndarray,
                   touching: bool) -> tuple[np.ndarray, float]:
-        data = (model(size, offsets).markers(p) - obs0) * w
-        pri = (prior_mat @ offsets[:, :, None])[..., 0]
+        data = (self.model(size, offsets).markers(p) - self.obs0) * self.w
+        pri = (self.prior_mat @ offsets[:, :, None])[..., 0]
         cost = float((data ** 2).sum() + (pri ** 2).sum())
-        if touching and len(pairs):
-            cost += float((gaps(p, size, pads) ** 2).sum())
+        if touching and len(self.pairs):
+            cost += float((self.gaps(p, size, pads) ** 2).sum())
         return data, cost
 
-    size, offsets = np.zeros(2), np.zeros((m, 3))
-    pads = np.tile([0.6, np.pi], len(digits))  # (along, angle) per digit: the palmar pad
-    n_size = 2 if solve_size else 0
-    n_pose = k * N_DOF
-    n_pad = len(pads)
-    n_par = n_pose + 3 * m + n_size + n_pad
+    def refit_cold(self, poses: np.ndarray, size: np.ndarray, offsets: np.ndarray, touching: bool) -> np.ndarray:
+        """``poses`` with each frame refitted from a cold start where that fits better (not a pinned
+        frame, nor a pinch frame once the contacts count)."""
+        obs, pairs = self.obs, self.pairs
+        solver = self.model(size, offsets)
+        fresh = solver.cold_start(obs)
+        better = (solver.evaluate(fresh, obs).rms < solver.evaluate(poses, obs).rms) & ~self.pinned
+        better[pairs[:, 0]] &= not touching  # a pinch frame's pose answers to its contact too
+        return np.where(better[:, None], fresh, poses)
+
+    def system(self, poses: np.ndarray, size: np.ndarray, offsets: np.ndarray, pads: np.ndarray,
+               touching: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The Jacobian of every residual (markers, prior, contacts) over every unknown, and the residuals."""
+        k, m, pairs, w, obs0 = self.k, self.m, self.pairs, self.w, self.obs0
+        n_pose, n_par, n_size, n_pad = self.n_pose, self.n_par, self.n_size, self.n_pad
+        solver = self.model(size, offsets)
+        pred, jac_pose = solver.jacobian(poses)  # (K, M, 3), (K, M, 3, 26)
+        r = (pred - obs0) * w
+        rows = k * m * 3
+        jac = np.zeros((rows + 3 * m + 3 * len(pairs), n_par))
+        jp = (jac_pose * w[..., None]).reshape(k, m * 3, N_DOF)
+        for f in range(k):
+            jac[f * m * 3:(f + 1) * m * 3, f * N_DOF:(f + 1) * N_DOF] = jp[f]
+        # Offsets move a marker with its bones' blended rotation.
+        rots, locs = solver.hand.forward(poses)
+        skin = rots @ np.swapaxes(solver.hand.rest[0], -1, -2)
+        b, bw = solver.binding.bones, solver.binding.weights
+        blended = skin[:, b[:, 0]] * bw[None, :, 0, None, None] + skin[:, b[:, 1]] * bw[None, :, 1, None, None]
+        blended = blended * w[..., None]  # (K, M, 3, 3)
+        for j in range(m):
+            jac[:rows, n_pose + 3 * j:n_pose + 3 * j + 3] = _scatter_rows(blended[:, j], k, m, j)
+        jac[rows:rows + 3 * m, n_pose:n_pose + 3 * m] = _block_diag(self.prior_mat)
+        con = self.gaps(poses, size, pads) if touching else np.zeros((len(pairs), 3))
+        for i in range(n_size):  # hand length and breadth by finite differences
+            h = np.zeros(2)
+            h[i] = 1e-4
+            moved = (self.model(size + h, offsets).markers(poses) - obs0) * w
+            jac[:rows, n_pose + 3 * m + i] = ((moved - r) / 1e-4).ravel()
+            if touching:
+                jac[rows + 3 * m:, n_pose + 3 * m + i] = ((self.gaps(poses, size + h, pads) - con) / 1e-4).ravel()
+        if touching:
+            h_ = self.sized(size)
+            _, jac_pad = HandSolver(h_, _pads(h_, self.digits, pads)).jacobian(poses[pairs[:, 0]])  # (C, D, 3, 26)
+            c = np.arange(len(pairs))
+            jgap = jac_pad[c, pairs[:, 1]] - jac_pad[c, pairs[:, 2]]  # (C, 3, 26)
+            for e, (row_, _, _) in enumerate(pairs):
+                jac[rows + 3 * m + 3 * e:rows + 3 * m + 3 * e + 3, row_ * N_DOF:(row_ + 1) * N_DOF] = jgap[e]
+            for i in range(n_pad):  # pads slide on the skin: finite differences
+                h = np.zeros(n_pad)
+                h[i] = 1e-4
+                jac[rows + 3 * m:, n_par - n_pad + i] = ((self.gaps(poses, size, pads + h) - con) / 1e-4).ravel()
+        res = np.concatenate([r.ravel(), (self.prior_mat @ offsets[:, :, None]).ravel(), con.ravel()])
+        return jac, res
+
+    def step(self, poses: np.ndarray, size: np.ndarray, offsets: np.ndarray, pads: np.ndarray, touching: bool,
+             lam: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One damped Gauss-Newton step (damping ``lam``): candidate poses, size, offsets and pads."""
+        k, m, n_pose, n_par, n_size, n_pad = self.k, self.m, self.n_pose, self.n_par, self.n_size, self.n_pad
+        lo, hi = POSE_LIMITS
+        jac, res = self.system(poses, size, offsets, pads, touching)
+        a = jac.T @ jac
+        g = jac.T @ res
+        a[np.diag_indices_from(a)] += lam * np.diag(a) + 1e-12
+        # Known poses keep their joint angles: those unknowns leave the system.
+        fixed = np.zeros((k, N_DOF), dtype=bool)
+        fixed[self.pinned, 6:] = True
+        fixed = np.flatnonzero(fixed.ravel())
+        a[fixed, :], a[:, fixed], g[fixed] = 0.0, 0.0, 0.0
+        a[fixed, fixed] = 1.0
+        delta = -np.linalg.solve(a, g)
+        cand_poses = HandSolver.step(poses, delta[:n_pose].reshape(k, N_DOF))
+        cand_poses[:, 6:] = np.clip(cand_poses[:, 6:], lo[6:], hi[6:])
+        cand_offsets = offsets + delta[n_pose:n_pose + 3 * m].reshape(m, 3)
+        cand_size = size + np.concatenate([delta[n_pose + 3 * m:n_pose + 3 * m + n_size], np.zeros(2 - n_size)])
+        cand_pads = pads + delta[n_par - n_pad:]
+        cand_pads[0::2] = np.clip(cand_pads[0::2], 0.25, 1.0)  # stay on the distal phalanx
+        return cand_poses, cand_size, cand_offsets, cand_pads
+
+
+def _solve(fit: _Fit, poses: np.ndarray, rounds: int, iterations: int, contact_after: int,
+           tick: Callable[[float], None]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float]:
+    """Levenberg-Marquardt over ``fit``'s unknowns from ``poses``, in ``rounds``: the poses, size,
+    offsets and pads found, how many pinch frames were dropped, and the marker RMS before."""
+    size, offsets = np.zeros(2), np.zeros((fit.m, 3))
+    pads = np.tile([0.6, np.pi], len(fit.digits))  # (along, angle) per digit: the palmar pad
     touching = False
     dropped = 0
-    _, cost = residuals(poses, size, offsets, pads, touching)
-    rms_before = float(np.sqrt(((model(size, offsets).markers(poses) - obs0) ** 2 * w).sum() / seen.sum()))
-    lo, hi = POSE_LIMITS
+    _, cost = fit.residuals(poses, size, offsets, pads, touching)
+    rms_before = float(np.sqrt(((fit.model(size, offsets).markers(poses) - fit.obs0) ** 2 * fit.w).sum()
+                               / fit.seen.sum()))
     for round_ in range(rounds):
-        if round_ and touching and len(pairs):
+        if round_ and touching and len(fit.pairs):
             # A pinch frame whose pose fell into another basin cannot close its gap and would bend
             # the calibration towards it: drop its contact (the markers still count).
-            keep = np.linalg.norm(gaps(poses, size, pads), axis=1) <= CONTACT_DROP
+            keep = np.linalg.norm(fit.gaps(poses, size, pads), axis=1) <= CONTACT_DROP
             dropped += int((~keep).sum())
-            pairs = pairs[keep]
+            fit.pairs = fit.pairs[keep]
         if round_:
             # The poses were first fitted with the uncalibrated markers; some may sit in a wrong
             # basin that the offsets then bend towards. Refit each frame from scratch too.
-            solver = model(size, offsets)
-            fresh = solver.cold_start(obs)
-            better = (solver.evaluate(fresh, obs).rms < solver.evaluate(poses, obs).rms) & ~pinned
-            better[pairs[:, 0]] &= not touching  # a pinch frame's pose answers to its contact too
-            poses = np.where(better[:, None], fresh, poses)
-            _, cost = residuals(poses, size, offsets, pads, touching)
+            poses = fit.refit_cold(poses, size, offsets, touching)
+            _, cost = fit.residuals(poses, size, offsets, pads, touching)
         lam = 1e-3
         for it in range(iterations // rounds):
             tick(0.3 + 0.7 * (round_ * (iterations // rounds) + it) / max(1, rounds * (iterations // rounds)))
-            if not touching and len(pairs) and round_ * (iterations // rounds) + it >= contact_after:
+            if not touching and len(fit.pairs) and round_ * (iterations // rounds) + it >= contact_after:
                 touching = True
-                _, cost = residuals(poses, size, offsets, pads, touching)
-            solver = model(size, offsets)
-            pred, jac_pose = solver.jacobian(poses)  # (K, M, 3), (K, M, 3, 26)
-            r = (pred - obs0) * w
-            rows = k * m * 3
-            jac = np.zeros((rows + 3 * m + 3 * len(pairs), n_par))
-            jp = (jac_pose * w[..., None]).reshape(k, m * 3, N_DOF)
-            for f in range(k):
-                jac[f * m * 3:(f + 1) * m * 3, f * N_DOF:(f + 1) * N_DOF] = jp[f]
-            # Offsets move a marker with its bones' blended rotation.
-            rots, locs = solver.hand.forward(poses)
-            skin = rots @ np.swapaxes(solver.hand.rest[0], -1, -2)
-            b, bw = solver.binding.bones, solver.binding.weights
-            blended = skin[:, b[:, 0]] * bw[None, :, 0, None, None] + skin[:, b[:, 1]] * bw[None, :, 1, None, None]
-            blended = blended * w[..., None]  # (K, M, 3, 3)
-            for j in range(m):
-                jac[:rows, n_pose + 3 * j:n_pose + 3 * j + 3] = _scatter_rows(blended[:, j], k, m, j)
-            jac[rows:rows + 3 * m, n_pose:n_pose + 3 * m] = _block_diag(prior_mat)
-            con = gaps(poses, size, pads) if touching else np.zeros((len(pairs), 3))
-            for i in range(n_size):  # hand length and breadth by finite differences
-                h = np.zeros(2)
-                h[i] = 1e-4
-                moved = (model(size + h, offsets).markers(poses) - obs0) * w
-                jac[:rows, n_pose + 3 * m + i] = ((moved - r) / 1e-4).ravel()
-                if touching:
-                    jac[rows + 3 * m:, n_pose + 3 * m + i] = ((gaps(poses, size + h, pads) - con) / 1e-4).ravel()
-            if touching:
-                h_ = sized(size)
-                _, jac_pad = HandSolver(h_, _pads(h_, digits, pads)).jacobian(poses[pairs[:, 0]])  # (C, D, 3, 26)
-                c = np.arange(len(pairs))
-                jgap = jac_pad[c, pairs[:, 1]] - jac_pad[c, pairs[:, 2]]  # (C, 3, 26)
-                for e, (row_, _, _) in enumerate(pairs):
-                    jac[rows + 3 * m + 3 * e:rows + 3 * m + 3 * e + 3, row_ * N_DOF:(row_ + 1) * N_DOF] = jgap[e]
-                for i in range(n_pad):  # pads slide on the skin: finite differences
-                    h = np.zeros(n_pad)
-                    h[i] = 1e-4
-                    jac[rows + 3 * m:, n_par - n_pad + i] = ((gaps(poses, size, pads + h) - con) / 1e-4).ravel()
-            res = np.concatenate([r.ravel(), (prior_mat @ offsets[:, :, None]).ravel(), con.ravel()])
-            a = jac.T @ jac
-            g = jac.T @ res
-            a[np.diag_indices_from(a)] += lam * np.diag(a) + 1e-12
-            # Known poses keep their joint angles: those unknowns leave the system.
-            fixed = np.zeros((k, N_DOF), dtype=bool)
-            fixed[pinned, 6:] = True
-            fixed = np.flatnonzero(fixed.ravel())
-            a[fixed, :], a[:, fixed], g[fixed] = 0.0, 0.0, 0.0
-            a[fixed, fixed] = 1.0
-            delta = -np.linalg.solve(a, g)
-            cand_poses = HandSolver.step(poses, delta[:n_pose].reshape(k, N_DOF))
-            cand_poses[:, 6:] = np.clip(cand_poses[:, 6:], lo[6:], hi[6:])
-            cand_offsets = offsets + delta[n_pose:n_pose + 3 * m].reshape(m, 3)
-            cand_size = size + np.concatenate([delta[n_pose + 3 * m:n_pose + 3 * m + n_size], np.zeros(2 - n_size)])
-            cand_pads = pads + delta[n_par - n_pad:]
-            cand_pads[0::2] = np.clip(cand_pads[0::2], 0.25, 1.0)  # stay on the distal phalanx
-            _, cand_cost = residuals(cand_poses, cand_size, cand_offsets, cand_pads, touching)
+                _, cost = fit.residuals(poses, size, offsets, pads, touching)
+            cand_poses, cand_size, cand_offsets, cand_pads = fit.step(poses, size, offsets, pads, touching, lam)
+            _, cand_cost = fit.residuals(cand_poses, cand_size, cand_offsets, cand_pads, touching)
             if cand_cost < cost:
                 poses, offsets, size, pads, cost = cand_poses, cand_offsets, cand_size, cand_pads, cand_cost
                 lam = max(lam / 3, 1e-9)
             else:
                 lam = min(lam * 4, 1e9)
-    final = model(size, offsets)
-    rms_after = float(np.sqrt(((final.markers(poses) - obs0) ** 2 * w).sum() / seen.sum()))
-    contact = {d: [round(float(pads[2 * i]), 4), round(float(np.degrees(pads[2 * i + 1])), 2)]
-               for i, d in enumerate(digits)}
-    gap = float(np.linalg.norm(gaps(poses, size, pads), axis=1).max()) if len(pairs) else float("nan")
-    return Calibration(layout.name, list(layout.names), side, final.hand.length, final.hand.breadth, offsets,
-                       rms_before, rms_after, [int(f) for f in picked], contact, gap, dropped)
+    return poses, size, offsets, pads, dropped, rms_before
 
 
 def _pads(hand: HandModel, digits: list[str], pads: np.ndarray) -> Binding:

@@ -41,6 +41,9 @@ class LabelerMethod:
             believed by calibrated confidence (the no-hand rule).
         whole_take: labels a take from its first frame on (no windows, no local re-solve).
         relabels_locally: a reviewer's re-solve may label only the frames around a change.
+        fits_performer: fitted on a labeled take of the performer (``fit``), else on the layout's
+            synthetic range of motion.
+        starts_from_frame: tracks from a labeled first frame (``start``).
     """
 
     name: ClassVar[str]
@@ -50,6 +53,8 @@ class LabelerMethod:
     low_probability: ClassVar[bool] = False
     whole_take: ClassVar[bool] = False
     relabels_locally: ClassVar[bool] = True
+    fits_performer: ClassVar[bool] = False
+    starts_from_frame: ClassVar[bool] = False
 
     @classmethod
     def make(cls, layout: Layout, model: str | os.PathLike | None = None, cache=None, **options) -> Labeler:
@@ -106,6 +111,7 @@ class CnnMethod(_OnnxMethod):
 class GmmMethod(LabelerMethod):
     name = "gmm"
     relabels_locally = False
+    fits_performer = True
 
     @classmethod
     def make(cls, layout: Layout, model: str | os.PathLike | None = None, cache=None, **options) -> Labeler:
@@ -135,6 +141,7 @@ class NearestMethod(LabelerMethod):
     name = "nearest"
     whole_take = True
     relabels_locally = False
+    starts_from_frame = True
 
     @classmethod
     def make(cls, layout: Layout, model: str | os.PathLike | None = None, cache=None, **options) -> Labeler:

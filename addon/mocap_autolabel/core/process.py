@@ -1,0 +1,242 @@
+"""The one per-take entry of every front end: :func:`process_take`.
+
+The CLI, batch and the Blender operators turn their options into a :class:`.settings.LabelSettings`
+and an :class:`Outputs`, call :func:`process_take`, and turn its :class:`TakeResult` into files,
+scenes and messages. The rules every front end shares live here once: the layout picked from the
+points' names, the doubt about the layout, the no-hand rule, and "solve the hand before a fill
+that uses it".
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+
+from .cache import RunCache
+from .checks import HandCheck, LayoutDoubt, hand_checks, time_limit_warning
+from .errors import MocapInputError
+from .fill import MAX_GAP, fill_gaps
+from .hand.calibrate import Calibration
+from .hands import HandNaming
+from .labelers import Labeler
+from .labelers.onnx_labeler import shipped_model
+from .labeling import Labeling, labeled_take
+from .layout import DEFAULT_LAYOUT, Layout, builtin_layouts, layout_for_names, load_layout
+from .pipeline import label_take
+from .settings import Corrections, LabelSettings
+from .solve import HandSolve, solve_hands
+from .stages.refine import CLEARLY_BETTER, DOUBTFUL_SHARE
+from .stages.run import Progress, no_progress
+from .take import Take
+
+#: Frames of the take the other layouts are tried on (about half a second each).
+CHECK_FRAMES = 2000
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """What a take's outputs need beyond its labels.
+
+    Attributes:
+        label: label the take; False: it is labeled already (its point names carry the labels).
+        check_hand: the no-hand rule: a labeling in which no hand is found raises.
+        check_layout: try the other built-in layouts where this one labels few samples confidently.
+        pick_layout: where another layout fits clearly better, label with it instead (the layout was
+            not the user's choice).
+        solve: solve the hand(s) (a calibrated rig per side).
+        fill: a fill method of :data:`.fill.FILL_METHODS`, or None for no fill.
+        max_gap: seconds; longer gaps stay open.
+        calibrations: per side (``""`` for one hand, ``left``, ``right``) a performer's calibration
+            to solve with instead of calibrating on the take.
+        solve_options: keywords of :func:`.solve.solve_take` (calibrate_seconds, reference,
+            contacts, side, smooth_hz).
+        confident: the confidence a segment needs to count as confident in the checks.
+    """
+
+    label: bool = True
+    check_hand: bool = True
+    check_layout: bool = True
+    pick_layout: bool = False
+    solve: bool = False
+    fill: str | None = None
+    max_gap: float = MAX_GAP
+    calibrations: dict[str, Calibration] | None = None
+    solve_options: dict = field(default_factory=dict)
+    confident: float = 0.95
+
+
+@dataclass
+class TakeResult:
+    """What :func:`process_take` made of one take.
+
+    Attributes:
+        take: the raw take as read (metres).
+        layout: the layout it was labeled with (the picked one, where it was picked).
+        labeling: the labeling (None for a take labeled already).
+        labeled: the labeled take (points named by label, ghosts unnamed after them).
+        checks: the no-hand rule per hand, ``[(side, HandCheck)]``.
+        doubt: another layout that fits clearly better, or None.
+        picked: ``{"from", "to", "share", "better_share"}`` where the layout was picked, else None.
+        solves: ``[(side, HandSolve)]``, side ``""`` for one hand.
+        filled: the fill (:class:`.fill.TakeFill`), or None.
+        warnings: one-line warnings for the user.
+        seconds: wall time of each step.
+    """
+
+    take: Take
+    layout: Layout
+    labeling: Labeling | None
+    labeled: Take
+    checks: list[tuple[str, HandCheck]] = field(default_factory=list)
+    doubt: LayoutDoubt | None = None
+    picked: dict | None = None
+    solves: list[tuple[str, HandSolve]] | None = None
+    filled: object | None = None
+    warnings: list[str] = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def output_take(self) -> Take:
+        """The take to write: filled where it was, else labeled."""
+        return self.filled.take if self.filled is not None else self.labeled
+
+    @property
+    def hand_count(self) -> int:
+        return 1 if self.labeling is None else self.labeling.info.get("hands", {}).get("count", 1)
+
+    def rig(self) -> HandSolve | list[tuple[str, HandSolve]] | None:
+        """The solve as the scene writers take it: one HandSolve for a plain one-hand take, else the list."""
+        if not self.solves:
+            return None
+        return self.solves[0][1] if [side for side, _ in self.solves] == [""] else self.solves
+
+
+def choose_layout(take: Take, requested: str | None) -> str:
+    """The layout to label ``take`` with: the one asked for, else the built-in layout whose every
+    marker the take's point names hold, else :data:`.layout.DEFAULT_LAYOUT`."""
+    if requested:
+        return requested
+    picked = None if take.unlabeled.all() else layout_for_names(take.names)
+    return picked or DEFAULT_LAYOUT
+
+
+def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: float = 0.95,
+                 cache: RunCache | None = None) -> LayoutDoubt | None:
+    """A :class:`.checks.LayoutDoubt` when another built-in layout fits ``take`` clearly better, else None.
+
+    Nothing is tried while at least :data:`DOUBTFUL_SHARE` of the labeled samples are confident.
+    Below it, every built-in layout with a shipped ``set`` model labels the take's first
+    :data:`CHECK_FRAMES` frames; one whose confident share is at least :data:`DOUBTFUL_SHARE` and
+    :data:`CLEARLY_BETTER` above ``layout``'s (on the same frames) is named.
+    """
+    share = labeling.summary(confident)["confident_share"]
+    if share >= DOUBTFUL_SHARE:
+        return None
+    excerpt = replace(take, positions=take.positions[:CHECK_FRAMES],
+                      residuals=None if take.residuals is None else take.residuals[:CHECK_FRAMES], filled=None)
+    shares = {}
+    for name in builtin_layouts():
+        if name != layout.name and os.path.isfile(shipped_model("set", name)):
+            try:
+                other = label_take(excerpt, load_layout(name), cache=cache)
+            except MocapInputError:  # e.g. no samples in the excerpt
+                continue
+            shares[name] = other.summary(confident)["confident_share"]
+    best = max(shares, key=shares.get, default=None)
+    if best is None or shares[best] < DOUBTFUL_SHARE:
+        return None
+    labeled = labeling.per_sample()[:CHECK_FRAMES] >= 0
+    own = (labeled & (labeling.per_sample_confidence()[:CHECK_FRAMES] >= confident)).sum() / max(labeled.sum(), 1)
+    if shares[best] - own < CLEARLY_BETTER:
+        return None
+    return LayoutDoubt(layout.name, float(share), best, float(shares[best]))
+
+
+def _naming(labeling: Labeling | None, settings: LabelSettings) -> HandNaming | None:
+    pattern = labeling.info.get("hands", {}).get("naming") if labeling is not None else settings.naming
+    return HandNaming(pattern) if pattern else None
+
+
+def _label(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs, result_seconds: dict,
+           progress: Progress, cache: RunCache, **inputs) -> tuple[Layout, Labeling, LayoutDoubt | None, dict | None]:
+    """Label, and where asked check the layout (and pick a better one)."""
+    t = time.perf_counter()
+    labeling = label_take(take, layout, settings, progress=progress, cache=cache, **inputs)
+    result_seconds["label"] = round(time.perf_counter() - t, 4)
+    one = labeling.info.get("hands", {}).get("count", 1) == 1
+    doubt, picked = None, None
+    if outputs.check_layout and one:
+        progress("checking the layout against the other built-in layouts", 1.0)
+        doubt = layout_doubt(take, layout, labeling, outputs.confident, cache)
+        corrections = inputs.get("corrections")
+        corrected = corrections is not None and (corrections.constraints or corrections.splits)
+        if doubt and outputs.pick_layout and not corrected:
+            # The take's shape says which layout it is: label with that one (the user chose none).
+            progress(f"checking: the take fits {doubt.better} better, labeling with it", 1.0)
+            better = load_layout(doubt.better)
+            labeling = label_take(take, better, settings, progress=progress, cache=cache)
+            picked = {"from": layout.name, "to": doubt.better, "share": doubt.share,
+                      "better_share": doubt.better_share}
+            layout, doubt = better, None
+    if doubt:
+        labeling.info["layout_doubt"] = asdict(doubt)  # in the report, and in the review scene's panel
+    return layout, labeling, doubt, picked
+
+
+def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs = Outputs(), *,
+                 corrections: Corrections | None = None, previous: Labeling | None = None,
+                 labeler: Labeler | None = None, fit: np.ndarray | None = None, start: np.ndarray | None = None,
+                 progress: Progress | None = None, cache: RunCache | None = None) -> TakeResult:
+    """Label ``take`` (unless it is labeled already), check it, solve the hand(s) and fill the gaps
+    as ``outputs`` asks; the keywords go to :func:`.pipeline.label_take`.
+
+    Raises:
+        MocapInputError: no hand found (the no-hand rule), or a take the steps cannot work with.
+    """
+    progress = progress or no_progress
+    cache = cache if cache is not None else RunCache()
+    seconds: dict[str, float] = {}
+    labeling, doubt, picked, checks, warnings = None, None, None, [], []
+    if outputs.label:
+        inputs = {"corrections": corrections or Corrections(), "previous": previous, "labeler": labeler,
+                  "fit": fit, "start": start}
+        layout, labeling, doubt, picked = _label(take, layout, settings, outputs, seconds, progress, cache, **inputs)
+        labeled = labeled_take(take, labeling)
+        facts = labeling.info["hands"]
+        if outputs.check_hand:
+            checks = hand_checks(take, layout, labeling, doubt)
+            if not any(check.found for _, check in checks):
+                hint = facts.get("warning")  # a take of two hands that never come apart
+                raise MocapInputError(take.source, "; ".join([f"{side} hand: {check}" if side else str(check)
+                                                              for side, check in checks] + ([hint] if hint else [])))
+            warnings += [f"{side} hand: {check}" for side, check in checks if not check.found]
+        warnings += [str(w) for w in (doubt, time_limit_warning(labeling)) if w]
+        if facts.get("forced") == 2:
+            warnings.append("two hands were forced, one was found")
+        if facts.get("warning"):
+            warnings.append(facts["warning"])
+    else:
+        labeled = take
+    naming = _naming(labeling, settings)
+    solves = None
+    if outputs.solve:
+        t = time.perf_counter()
+        many = labeling is not None and labeling.info["hands"].get("count", 1) == 2
+        progress("solving both hands" if many else "solving the hand", 0.0)
+        solves = solve_hands(labeled, layout, naming, outputs.calibrations,
+                             progress=lambda message, share: progress(message, share), **outputs.solve_options)
+        seconds["solve"] = round(time.perf_counter() - t, 4)
+    filled = None
+    if outputs.fill is not None:
+        t = time.perf_counter()
+        progress("filling gaps", 0.0)
+        # A fill that uses the hand solves it first where it is not solved yet (:func:`.fill.fill_gaps`).
+        filled = fill_gaps(labeled, layout, outputs.fill, outputs.max_gap, solves=solves, naming=naming,
+                           calibrations=outputs.calibrations, **outputs.solve_options)
+        if solves is None and filled.solves:
+            solves = filled.solves
+        seconds["fill"] = round(time.perf_counter() - t, 4)
+    return TakeResult(take, layout, labeling, labeled, checks, doubt, picked, solves, filled, warnings, seconds)
