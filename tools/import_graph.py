@@ -31,10 +31,12 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1] / "addon" / PACKAGE
 
 #: Orchestrator modules of core: above every other core module.
 ORCHESTRATOR = frozenset({f"{PACKAGE}.core.pipeline", f"{PACKAGE}.core.windows"})
+#: The per-take entry of the front ends: above the orchestrator, the top of core.
+ENTRY = frozenset({f"{PACKAGE}.core.process"})
 #: Front ends: above core, never imported by it.
 FRONT = frozenset(f"{PACKAGE}.{name}" for name in ("cli", "batch", "farm", "html_report", "__main__"))
 #: Ordered layers (rank, name); FRONT is outside this order except for being above core.
-RANKS = {"core": 0, "orchestrator": 1, "blender": 2, "operators": 3, "ui": 4, "__init__": 5}
+RANKS = {"core": 0, "orchestrator": 1, "entry": 2, "blender": 3, "operators": 4, "ui": 5, "__init__": 6}
 MAX_FUNCTION_LINES = 120
 
 
@@ -198,6 +200,8 @@ def layer(module: str) -> str:
         return "__init__"
     if module in ORCHESTRATOR:
         return "orchestrator"
+    if module in ENTRY:
+        return "entry"
     if module in FRONT:
         return "front"
     top = module.split(".")[1]
@@ -207,7 +211,7 @@ def layer(module: str) -> str:
 def _is_upward(importer: str, imported: str) -> bool:
     low, high = layer(importer), layer(imported)
     if high == "front":
-        return low in ("core", "orchestrator")
+        return low in ("core", "orchestrator", "entry")
     if low == "front":
         return False
     return RANKS[high] > RANKS[low]

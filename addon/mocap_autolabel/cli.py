@@ -533,11 +533,10 @@ def _label(args) -> int:
     import numpy as np
 
     from .core.atomic import atomic_output
-    from .core.checks import time_limit_warning
     from .core.labelers import labeler_method
     from .core.labeling import layout_markers, unlabeled_point_names
     from .core.layout import load_layout
-    from .core.process import Outputs, process_take
+    from .core.process import Outputs, process_take, time_limit_warning
     from .core.quiet import silenced_stdout
     from .core.synth.generate import load_truth, truth_path
     from .core.take import read_take
@@ -700,7 +699,7 @@ def _solve_progress(bar: _ProgressBar) -> dict:
     """``solve_take``'s progress argument where it has one (stage and share done, 0 to 1)."""
     import inspect
 
-    from .core.solve import solve_take
+    from .core.process import solve_take
 
     return {"progress": bar} if "progress" in inspect.signature(solve_take).parameters else {}
 
@@ -710,7 +709,7 @@ def _solve(args) -> int:
     from .core.hand.calibrate import Calibration
     from .core.hands import HandNaming, labeled_layout, sided_path, split_hands
     from .core.layout import load_layout
-    from .core.solve import solve_hands
+    from .core.process import solve_hands
     from .core.take import read_take
 
     outputs = (("--blend", args.blend, ".blend"), ("--fbx", args.fbx, ".fbx"), ("--bvh", args.bvh, ".bvh"))

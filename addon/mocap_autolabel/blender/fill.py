@@ -23,7 +23,7 @@ import bpy
 import numpy as np
 
 from ..core.errors import MocapInputError
-from ..core.fill import fill_gaps
+from ..core.fill import fill_gaps, fill_method
 from ..core.labeling import labeled_take
 from ..core.review import marker_classes
 from . import animio
@@ -165,17 +165,17 @@ def fill_scene(take_coll: bpy.types.Collection, method: str = "auto", max_gap: f
     lab_take = labeled_take(take, labeling)
     pattern = labeling.info.get("hands", {}).get("naming")
     naming = HandNaming(pattern) if pattern else None
-    if solves is None and method in ("hand", "auto"):
+    calibrations = {}
+    if solves is None and fill_method(method).uses_hand:
         calibrations = take_calibrations(take_coll)
         sides = set(hands_in_names(lab_take.names, layout, naming))
-        if sides and sides <= set(calibrations):
-            from ..core.pipeline import solve_hands
-
-            solves = solve_hands(lab_take, layout, naming, calibrations)
-        elif method == "hand":
-            raise MocapInputError(take_coll.name, "has no solved hand to fill from: Solve Hand first (or use "
-                                                  "another method)")
-    result = fill_gaps(lab_take, layout, method, max_gap, solves=solves or [], naming=naming)
+        if not (sides and sides <= set(calibrations)):  # no calibrated hand to solve
+            if fill_method(method).needs_hand:
+                raise MocapInputError(take_coll.name, "has no solved hand to fill from: Solve Hand first (or use "
+                                                      "another method)")
+            solves = []
+    # fill_gaps solves the calibrated hand first where the method uses it and no solve is given.
+    result = fill_gaps(lab_take, layout, method, max_gap, solves=solves, naming=naming, calibrations=calibrations)
     n = len(labeling.names)
     chosen = sorted(set(range(n) if labels is None else labels))
     for label in chosen:

@@ -24,7 +24,7 @@ Nothing here decides labels: that is ``core.pipeline`` and ``core.review``.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
@@ -257,7 +257,7 @@ def summary(labeling: Labeling, sure: float, first: int = 0) -> dict:
     and the warning when another layout fits the take clearly better (or None); ``first``: the scene frame
     of the take's first sample."""
     from ..core.hands import traded_text
-    from ..core.pipeline import LayoutDoubt
+    from ..core.process import LayoutDoubt
 
     s = labeling.summary(sure)
     doubt = labeling.info.get("layout_doubt")
@@ -367,58 +367,45 @@ class LabelRequest:
     done: float = 0.0
     stage: str = ""
     #: the layout was not chosen by the user: where another built-in layout fits the take clearly
-    #: better (:func:`.core.pipeline.layout_doubt`), :meth:`run` labels with that one instead
+    #: better (:func:`.core.process.layout_doubt`), :meth:`run` labels with that one instead
     pick_layout: bool = False
     picked: dict | None = None  # what :meth:`run` picked: {"from", "to", "share", "better_share"}
+    cache: object = None  # the session's :class:`core.cache.RunCache` (results kept between re-solves)
 
     def run(self, say=None, check_layout: bool = False) -> Labeling:
         """The labeling; with ``check_layout``, ``info["layout_doubt"]`` (a :class:`LayoutDoubt` as a
         dict) says when another layout fits the take clearly better (a re-solve keeps what the
         labeling it replaces said), and a take in which no hand is found (the CLI's and batch's
-        rule, :func:`.core.pipeline.hand_checks`) raises :class:`MocapInputError`: nothing is built.
+        rule, :func:`.core.process.process_take`) raises :class:`MocapInputError`: nothing is built.
 
-        ``say(message)`` hears each stage as it starts (``"scoring 1200 frames with set (stage 2 of
-        3)"``); :attr:`stage` holds that line and :attr:`done` the share of the work done before it
-        (:func:`core.review.stage_progress`).
+        ``say(message)`` hears each stage as it starts; :attr:`stage` holds that line and
+        :attr:`done` the share of the work done (the core's one progress protocol).
         """
-        from ..core.errors import MocapInputError
-        from ..core.pipeline import hand_checks, label_take, layout_doubt
-        from ..core.review import stage_progress
+        from ..core.process import Outputs, process_take
+        from ..core.settings import Corrections, LabelSettings
 
-        track = stage_progress(check_layout)
-
-        def staged(message: str) -> None:
-            self.stage, self.done = track(message)
+        def staged(message: str, share: float) -> None:
+            self.stage, self.done = message, share
             if say is not None:
-                say(self.stage)  # a cancelled job raises here, between stages
+                say(message)  # a cancelled job raises here
 
+        options = dict(self.hand_options)
+        corrections = Corrections(constraints=tuple(self.review.constraints), splits=tuple(self.review.splits),
+                                  hand_swaps=options.pop("hand_swaps", None))
+        settings = LabelSettings(method=self.method, temporal=self.temporal, **options)
+        # As the command line does: the layout on one hand, the no-hand rule per hand.
+        outputs = Outputs(check_hand=check_layout, check_layout=check_layout, pick_layout=self.pick_layout,
+                          layout_hint="Layout {} in the Mocap tab")
         # A re-solve labels again only the frames around what the reviewer changed since.
-        labeling = label_take(self.take, self.layout, method=self.method, temporal=self.temporal,
-                              constraints=self.review.constraints, splits=self.review.splits,
-                              labeler=self.labeler, progress=staged, previous=None if check_layout else self.previous,
-                              **self.hand_options)
-        if check_layout:  # as the command line does: the layout on one hand, the no-hand rule per hand
-            one = labeling.info.get("hands", {}).get("count", 1) == 1
-            staged("checking the layout against the other built-in layouts" if one else "checking both hands")
-            doubt = layout_doubt(self.take, self.layout, labeling) if one else None
-            if doubt and self.pick_layout and not self.review.constraints and not self.review.splits:
-                # The take's shape says which layout it is: label with that one (the user chose none).
-                staged(f"checking: the take fits {doubt.better} better, labeling with it")
-                better = load_layout(doubt.better)
-                labeling = label_take(self.take, better, method=self.method, temporal=self.temporal,
-                                      progress=staged, **self.hand_options)
-                self.picked = {"from": self.layout.name, "to": doubt.better, "share": doubt.share,
-                               "better_share": doubt.better_share}
-                self.layout, self.layout_ref, self.previous = better, doubt.better, None
-                doubt = None
-            checks = hand_checks(self.take, self.layout, labeling, doubt)
-            if not any(check.found for _, check in checks):
-                raise MocapInputError(self.take_name, checks[0][1].describe("Layout {} in the Mocap tab"))
-            doubt = asdict(doubt) if doubt else None
-        else:
-            doubt = self.previous.info.get("layout_doubt") if self.previous is not None else None
-        if doubt:
-            labeling.info["layout_doubt"] = doubt
+        result = process_take(self.take, self.layout, settings, outputs, corrections=corrections,
+                              previous=None if check_layout else self.previous, labeler=self.labeler,
+                              progress=staged, cache=self.cache)
+        labeling = result.labeling
+        if result.picked:
+            self.picked = result.picked
+            self.layout, self.layout_ref, self.previous = result.layout, result.layout.name, None
+        if not check_layout and self.previous is not None and self.previous.info.get("layout_doubt"):
+            labeling.info["layout_doubt"] = self.previous.info["layout_doubt"]
         self.done = 1.0
         return labeling
 
@@ -434,8 +421,8 @@ def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None
     forces the count, and where that changes it, the corrections naming labels are dropped (a
     hand's labels mean nothing to the other count) and reported the same way.
     """
-    from ..core.labelers import make_labeler
-    from .session import labeler
+    from ..core.labelers import labeler_method, make_labeler
+    from .session import labeler, session
 
     state = load_state(take_coll) if has_review(take_coll) else None
     layout_ref = layout_ref or (state.layout if state else "han19")
@@ -452,11 +439,11 @@ def prepare_label(take_coll: bpy.types.Collection, layout_ref: str | None = None
         review, dropped = remap_review(state.review, state.labeling.names, names)
     take = current_take(take_coll)
     lab = None
-    if method in ("set", "perm", "cnn"):
+    if labeler_method(method).onnx:
         lab = labeler(take_coll, method, layout, lambda: make_labeler(method, layout))
     return LabelRequest(take_coll.name, take, layout, layout_ref, method, temporal, review, previous, lab,
                         state.token if state else "", dropped, list(state.labeling.names) if state else [],
-                        hand_options, hands_changed)
+                        hand_options, hands_changed, cache=session(take_coll).cache)
 
 
 def finish_label(scene: bpy.types.Scene, take_coll: bpy.types.Collection, request: LabelRequest,

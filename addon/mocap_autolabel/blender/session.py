@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.cache import RunCache
 from ..core.labelers.base import RememberingLabeler
 from ..core.take import Take
 
@@ -23,6 +24,7 @@ class TakeSession:
     take_key: tuple = ()
     labelers: dict = field(default_factory=dict)
     classes: tuple[str, np.ndarray] | None = None  # (state token, marker classes)
+    cache: RunCache = field(default_factory=RunCache)  # the labeling's results kept between re-solves
 
 
 _SESSIONS: dict[int, TakeSession] = {}

@@ -62,11 +62,13 @@ class FillMethod:
     Attributes:
         name: the method's name (``--fill-method``, the panel).
         uses_hand: fills from the solved hand: the hand is solved before the fill.
+        needs_hand: fills from nothing else (no hand solve, no fill).
         tries: the models it tries per gap, best expected error first (``auto`` tries several).
     """
 
     name: ClassVar[str]
     uses_hand: ClassVar[bool] = False
+    needs_hand: ClassVar[bool] = False
     tries: ClassVar[tuple[str, ...]]
 
 
@@ -87,7 +89,7 @@ class RigidMethod(FillMethod):
 
 
 class HandMethod(FillMethod):
-    name, uses_hand, tries = "hand", True, ("hand",)
+    name, uses_hand, needs_hand, tries = "hand", True, True, ("hand",)
 
 
 class PCAMethod(FillMethod):

@@ -27,10 +27,14 @@ from .labeling import Labeling, labeled_take
 from .layout import DEFAULT_LAYOUT, Layout, builtin_layouts, layout_for_names, load_layout
 from .pipeline import label_take
 from .settings import Corrections, LabelSettings
-from .solve import HandSolve, solve_hands
+from .solve import HandSolve, solve_hands, solve_take
 from .stages.refine import CLEARLY_BETTER, DOUBTFUL_SHARE
 from .stages.run import Progress, no_progress
 from .take import Take
+
+#: What the front ends (CLI, batch, Blender) use of the core's labeling and solving.
+__all__ = ["LayoutDoubt", "Outputs", "TakeResult", "choose_layout", "layout_doubt", "process_take", "solve_hands",
+           "solve_take", "time_limit_warning"]
 
 #: Frames of the take the other layouts are tried on (about half a second each).
 CHECK_FRAMES = 2000
@@ -54,6 +58,8 @@ class Outputs:
         solve_options: keywords of :func:`.solve.solve_take` (calibrate_seconds, reference,
             contacts, side, smooth_hz).
         confident: the confidence a segment needs to count as confident in the checks.
+        layout_hint: how the front end's user picks another layout (``{}``: its name), for the
+            no-hand rule's message.
     """
 
     label: bool = True
@@ -66,6 +72,7 @@ class Outputs:
     calibrations: dict[str, Calibration] | None = None
     solve_options: dict = field(default_factory=dict)
     confident: float = 0.95
+    layout_hint: str = "--layout {}"
 
 
 @dataclass
@@ -210,8 +217,8 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
             checks = hand_checks(take, layout, labeling, doubt)
             if not any(check.found for _, check in checks):
                 hint = facts.get("warning")  # a take of two hands that never come apart
-                raise MocapInputError(take.source, "; ".join([f"{side} hand: {check}" if side else str(check)
-                                                              for side, check in checks] + ([hint] if hint else [])))
+                said = [f"{side} hand: " * bool(side) + check.describe(outputs.layout_hint) for side, check in checks]
+                raise MocapInputError(take.source, "; ".join(said + ([hint] if hint else [])))
             warnings += [f"{side} hand: {check}" for side, check in checks if not check.found]
         warnings += [str(w) for w in (doubt, time_limit_warning(labeling)) if w]
         if facts.get("forced") == 2:

@@ -121,7 +121,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
             self.report({"WARNING"}, f"{request.take_name}: {s['hands_warning']}")
         if s["layout_doubt"]:
             self.report({"WARNING"}, f"{request.take_name}: {s['layout_doubt']}")
-        from ..core.pipeline import time_limit_warning
+        from ..core.process import time_limit_warning
 
         hurried = time_limit_warning(labeling)  # as the CLI and batch warn
         if hurried:
@@ -139,7 +139,7 @@ class MOCAPAL_OT_label(bpy.types.Operator):
         n = len(request.dropped)
         lacks = f"{request.layout.name} lacks"
         if request.hands_changed:
-            hands = "two hands" if request.hand_options.get("hands") == 2 else "one hand"
+            hands = "two hands" if request.hand_options.get("hand_count") == 2 else "one hand"
             lacks = f"{request.layout.name} with {hands} lacks"
         return (f"{request.take_name}: {n} {'correction names a marker' if n == 1 else 'corrections name markers'} "
                 f"that {lacks}, and {'is' if n == 1 else 'are'} dropped ({said}); "

@@ -43,7 +43,7 @@ class SolveRequest:
         side). ``say(message)`` gets each stage (and may raise to stop, as a cancelled Job's does)."""
         from ..core.errors import MocapInputError
         from ..core.hands import split_hands
-        from ..core.pipeline import solve_take
+        from ..core.process import solve_take
 
         hands = split_hands(self.take, self.layout, self.naming)
         out = []

@@ -24,7 +24,8 @@ def relabel_plan(info: dict | None, layout: Layout, hands: str | int = "auto") -
     lets a one-hand take be found again as the first labeling was; ``1`` / ``2`` force the count.
 
     Returns:
-        ``label_take``'s hand keywords, the label names that labeling will have (where the count
+        the hand fields of :class:`..settings.LabelSettings` (and ``hand_swaps`` of
+        :class:`..settings.Corrections`), the label names that labeling will have (where the count
         is known: a one-hand take under ``"auto"`` may still be found to hold two), and whether the
         count of hands changes (then the corrections that name a hand's labels cannot follow).
     """
@@ -32,15 +33,17 @@ def relabel_plan(info: dict | None, layout: Layout, hands: str | int = "auto") -
     options = earlier
     if str(hands) in ("1", "2"):
         n = int(hands)
-        options = earlier if n == 2 and earlier else {"hands": n}
-    two = options.get("hands") == 2
-    names = sided_layout_names(layout, list(SIDES), options.get("naming", HandNaming())) if two else list(layout.names)
+        options = earlier if n == 2 and earlier else {"hand_count": n}
+    two = options.get("hand_count") == 2
+    naming = HandNaming(options["naming"]) if options.get("naming") else HandNaming()
+    names = sided_layout_names(layout, list(SIDES), naming) if two else list(layout.names)
     changed = info is not None and two != bool(earlier)
     return options, names, changed
 
 
 def relabel_options(info: dict) -> dict:
-    """``label_take`` keywords that keep a labeling's hands when the take is labeled again with its
+    """The settings' hand fields (and the corrections' ``hand_swaps``) that keep a labeling's hands
+    when the take is labeled again with its
     corrections: the count, each hand's side in :func:`find_hands`' order (so that no labeling run
     is spent deciding them again and every correction's label keeps its hand), the frames where the
     hands traded places (:func:`identity_swaps`) and the naming.
@@ -48,10 +51,10 @@ def relabel_options(info: dict) -> dict:
     facts = info.get("hands", {}) if info else {}
     if facts.get("count", 1) != 2:
         return {}
-    out: dict = {"hands": 2}
+    out: dict = {"hand_count": 2}
     if facts.get("by_hand_order"):
         out["sides"] = list(facts["by_hand_order"])
     if facts.get("naming"):
-        out["naming"] = HandNaming(facts["naming"])
+        out["naming"] = HandNaming(facts["naming"]).template
     out["hand_swaps"] = [list(r) for r in facts.get("swaps", [])]
     return out

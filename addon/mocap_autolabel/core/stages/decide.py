@@ -25,6 +25,7 @@ from ..temporal.confidence import (
 from ..temporal.continuity import continuity_logp
 from ..temporal.partners import partner_logp, take_distances
 from ..temporal.voting import Samples, Segments, vote
+from .look import look_again
 from .run import LabelRun
 from .scoring import score_samples
 
@@ -237,8 +238,6 @@ def decide(run: LabelRun, scores: np.ndarray, first: Labeling | None = None, sam
 
 def decide_stage(run: LabelRun) -> None:
     """The first decision: the vote (with the hands' early second look for two hands)."""
-    from .refine import look_again
-
     fitted_settings(run)
     run.say(f"temporal step: {run.settings.temporal}")
     t = time.perf_counter()
