@@ -146,7 +146,7 @@ def test_relabel_tools_work_across_both_hands_and_re_solve_keeps_them(labeled, c
     # Re-solve: the hands keep their sides (passed back, so no labeling run decides them again) and
     # every correction holds.
     request = prepare_label(coll)
-    assert request.hand_options["hands"] == 2
+    assert request.hand_options["hand_count"] == 2
     assert request.hand_options["sides"] == lab.info["hands"]["by_hand_order"]
     assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}
     state = _state(coll)

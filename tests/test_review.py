@@ -181,18 +181,18 @@ def test_remembering_labeler_serves_both_hands_of_a_re_solve():
 
 
 def test_labeling_again_keeps_two_hands_and_their_sides_unless_told():
-    from mocap_autolabel.core.hands import HandNaming, relabel_plan
+    from mocap_autolabel.core.hands import relabel_plan
 
     layout = load_layout("han19")
     two = {"hands": {"count": 2, "sides": ["left", "right"], "by_hand_order": ["right", "left"],
                      "naming": "{Side}Hand:{name}"}}
     one = {"hands": {"count": 1}}
     options, names, changed = relabel_plan(two, layout)
-    assert options == {"hands": 2, "sides": ["right", "left"], "naming": HandNaming("{Side}Hand:{name}"),
+    assert options == {"hand_count": 2, "sides": ["right", "left"], "naming": "{Side}Hand:{name}",
                        "hand_swaps": []}  # the hands traded places nowhere: not looked for again
     assert names[0] == "LeftHand:ThumbCMC" and names[19] == "RightHand:ThumbCMC" and not changed
     assert relabel_plan(two, layout, "2")[0] == options
-    assert relabel_plan(two, layout, "1") == ({"hands": 1}, layout.names, True)
+    assert relabel_plan(two, layout, "1") == ({"hand_count": 1}, layout.names, True)
     assert relabel_plan(one, layout) == ({}, layout.names, False)  # found again, as the first time
     assert relabel_plan(one, layout, "2")[1][0] == "L_ThumbCMC" and relabel_plan(one, layout, "2")[2]
-    assert relabel_plan(None, layout, "2") == ({"hands": 2}, relabel_plan(one, layout, "2")[1], False)
+    assert relabel_plan(None, layout, "2") == ({"hand_count": 2}, relabel_plan(one, layout, "2")[1], False)

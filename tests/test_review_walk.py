@@ -11,7 +11,6 @@ from mocap_autolabel.core.review import (
     describe,
     plural,
     remap_review,
-    stage_progress,
     uncertain_segments,
     walk_uncertain,
 )
@@ -85,9 +84,17 @@ def test_messages_and_progress():
     c = Constraint(3, 99, 1200, 0)
     assert describe(c, ["ThumbTip"], ["*0", "*1", "*2", "*3"], first=1) == "ThumbTip on *3, frames 100-1200"
     assert describe(Constraint(1, 0, 5, NULL), ["x"], ["*0", "pillow_top"]) == "unlabeled on pillow_top, frames 0-4"
-    track = stage_progress(check_layout=False)
-    lines = [track(m) for m in ("finding hands", "packing frames", "scoring 10 frames with set",
-                                "temporal step: vote")]
-    assert [line for line, _ in lines][-1] == "temporal step: vote (stage 4 of 4)"
-    shares = [d for _, d in lines]
-    assert shares[0] == 0.0 and shares == sorted(shares) and shares[-1] < 1.0
+
+
+def test_label_take_reports_progress_as_message_and_share(han19):
+    """The core's one progress protocol: each call gives a message and the share done, which never
+    goes back and ends at 1."""
+    from mocap_autolabel.core.pipeline import label_take
+    from mocap_autolabel.core.synth.generate import synthesize
+
+    take = synthesize(han19, frames=120, seed=3).take
+    heard: list[tuple[str, float]] = []
+    label_take(take, han19, progress=lambda message, share: heard.append((message, share)))
+    messages, shares = [m for m, _ in heard], [s for _, s in heard]
+    assert messages[0] == "finding hands" and any(m.startswith("scoring") for m in messages)
+    assert shares == sorted(shares) and shares[-1] == 1.0

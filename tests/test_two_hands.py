@@ -158,7 +158,7 @@ def test_hands_that_trade_places_where_they_touch_keep_their_sides(han19):
     # Labeled again with a correction (as a reviewer's re-solve does), the hands stay traded.
     f, p = map(int, np.argwhere(ok)[0])
     options = relabel_options(lab.info)
-    again = label_take(take, han19, LabelSettings(hand_count=options["hands"], sides=options["sides"],
+    again = label_take(take, han19, LabelSettings(hand_count=options["hand_count"], sides=options["sides"],
                                                   naming=options.get("naming")),
                        corrections=Corrections(constraints=[Constraint(p, f, f + 1, int(per[f, p]))],
                                                hand_swaps=options["hand_swaps"]))

@@ -98,10 +98,10 @@ def test_a_two_hand_re_solve_keeps_each_windows_sides(han19):
     two = two_hand_take(han19, 1500, seed=5, config=TwoHandConfig(close_share=0.0))
     lab = label_take(two.take, han19, LabelSettings(window=600))
     options = relabel_options(lab.info)
-    assert options["hands"] == 2 and len(options["sides"]) == len(lab.info["windows"])
+    assert options["hand_count"] == 2 and len(options["sides"]) == len(lab.info["windows"])
     seg = int(np.argmax(lab.length * (lab.label >= 0)))
     c = Constraint(int(lab.slot[seg]), int(lab.start[seg]), int(lab.stop[seg]), int(lab.label[seg]))
-    settings = LabelSettings(window=600, hand_count=options["hands"], sides=options["sides"],
+    settings = LabelSettings(window=600, hand_count=options["hand_count"], sides=options["sides"],
                              naming=options.get("naming"))
     again = label_take(two.take, han19, settings,
                        corrections=Corrections(constraints=[c], hand_swaps=options["hand_swaps"]))
@@ -189,7 +189,7 @@ def test_a_two_hand_re_solve_labels_again_around_the_change(han19):
     seg = _middle_segment(lab, two.take.n_frames)
     c = Constraint(int(lab.slot[seg]), int(lab.start[seg]), int(lab.stop[seg]), int(lab.label[seg]))
     options = relabel_options(lab.info)
-    settings = LabelSettings(hand_count=options["hands"], sides=options["sides"], naming=options.get("naming"))
+    settings = LabelSettings(hand_count=options["hand_count"], sides=options["sides"], naming=options.get("naming"))
     corrections = Corrections(constraints=[c], hand_swaps=options["hand_swaps"])
     full = label_take(two.take, han19, settings, corrections=corrections)
     local = label_take(two.take, han19, settings, corrections=corrections, previous=lab)

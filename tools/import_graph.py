@@ -6,10 +6,11 @@ Every module is parsed with ``ast``; imports anywhere in a module count (module 
 functions), relative imports are resolved, and ``from .x import y`` where ``y`` is a submodule counts
 as importing that submodule (otherwise as importing ``x``).
 
-Layers, lowest first: ``core`` < the orchestrator (``core/pipeline.py``, ``core/windows.py``) <
-``blender`` < ``operators`` < ``ui`` < the package's ``__init__``. The front ends (``cli.py``,
-``batch.py``, ``farm.py``, ``html_report.py``, ``__main__.py``) sit above core: core must not import
-them (their order against blender/operators/ui is not checked).
+Layers, lowest first: ``core`` < the orchestrator (``core/pipeline.py``, ``core/windows.py``) < the
+per-take entry (``core/process.py``) < ``blender`` < ``operators`` < ``ui`` < the package's ``__init__``.
+The front ends (``cli.py``, ``batch.py``, ``farm.py``, ``html_report.py``, ``__main__.py``, and any
+other top-level module) sit above core: core must not import them (their order against
+blender/operators/ui is not checked).
 
 Prints (a) every import circle (a strongly connected component of more than one module, with one
 example cycle), (b) every import from a lower layer to a higher one and, with ``--long-functions``,
@@ -195,7 +196,7 @@ def circles(modules: dict[str, Path], edges: list[Edge]) -> list[dict]:
 
 
 def layer(module: str) -> str:
-    """The layer of a module: core, orchestrator, front, blender, operators, ui or __init__."""
+    """The layer of a module: core, orchestrator, entry, front, blender, operators, ui or __init__."""
     if module == PACKAGE:
         return "__init__"
     if module in ORCHESTRATOR:

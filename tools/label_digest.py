@@ -13,9 +13,12 @@ gmm/viterbi, nearest/none; (b) the real glove13 recording, default and gmm/vote;
 han2018 left + right pairs (hands auto, and each hand alone with ``hands=1``), synthetic
 interacting takes (seeds 0-5, 1,200 frames), long ones (seeds 0-1, 3,000 frames), a held prop
 (seeds 0-1, props off and on); (d) the demo take (default and ``validate=True``) and the take of
-``synth --hands 2 --layout han19 --frames 1200 --seed 2``; (e) re-solves of the demo take with
-``previous=``: a constraint relabeling a mid-take segment, a split of a long segment; (f) windows:
-5,000-frame one-hand and two-hand synthetic takes with ``window=2000``. ``--quick`` keeps a handful.
+``synth --hands 2 --layout han19 --frames 1200 --seed 2``; (e) re-solves with ``previous=`` the
+take's default labeling: a constraint moving a mid-take segment to another label, and a split of
+it, on the demo take (labeled whole again: it is too short for a local re-solve) and on 3,000-frame
+one-hand and two-hand synthetic takes (only the stretch around the change labeled again); (f) windows:
+5,000-frame one-hand and two-hand synthetic takes with ``window=2000``. ``--quick`` keeps a handful
+(3 han2018 takes and 2 rows, glove default, 2 synthetic two-hand takes, demo, 2 re-solves, one window).
 
 The script speaks both APIs of ``label_take``: the keyword one (``score=``, ``hands=``,
 ``constraints=``...) and the refactored one (``LabelSettings`` + ``Corrections``), chosen at run
@@ -249,13 +252,13 @@ def demo_cases(quick: bool) -> Iterator[Case]:
         yield "synth-cli/hands2-seed2", lambda: label(
             two_hand_take(layout, 1200, seed=2, config=TwoHandConfig(prop_markers=0), rate=120.0).take, layout)
     yield "resolve/demo-constraint", functools.partial(_resolve_constraint, "demo")
-    if quick:
-        return
-    yield "resolve/demo-split", functools.partial(_resolve_split, "demo")
-    for key in ("long1", "long2"):
+    if not quick:
+        yield "resolve/demo-split", functools.partial(_resolve_split, "demo")
+    for key in ("long1",) if quick else ("long1", "long2"):
         yield f"resolve/{key}-first", functools.partial(_first, key)
         yield f"resolve/{key}-constraint", functools.partial(_resolve_constraint, key)
-        yield f"resolve/{key}-split", functools.partial(_resolve_split, key)
+        if not quick:
+            yield f"resolve/{key}-split", functools.partial(_resolve_split, key)
 
 
 def window_cases(quick: bool) -> Iterator[Case]:

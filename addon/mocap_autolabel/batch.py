@@ -327,7 +327,9 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
             out["hand"] = reports[0]
         if settings.needs_blender():
             t = time.perf_counter()
-            rigs = solved if two else solved[0][1]
+            from .core.process import as_rig
+
+            rigs = as_rig(solved)
             out["outputs"].update(_blender_outputs(labeled, rigs, os.path.join(out_dir, name), settings))
             timings["blender"] = round(time.perf_counter() - t, 4)
     if settings.html:

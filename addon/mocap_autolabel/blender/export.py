@@ -11,6 +11,7 @@ import bpy
 
 from ..core.atomic import atomic_output
 from ..core.errors import MocapInputError
+from ..core.process import as_solves
 
 
 def _only_selected(arm_obj: bpy.types.Object) -> None:
@@ -101,7 +102,7 @@ def write_solved_scene(take, solved, blend: str | None = None, fbx: str | None =
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     coll = build_take(take, scene, ImportOptions())
-    hands = solved if isinstance(solved, list) else [("", solved)]
+    hands = as_solves(solved)
     rigs = []
     for side, one in hands:
         name = f"Hand_{side[0].upper()}" if side else "Hand"
@@ -142,7 +143,7 @@ def write_review_scene(take, layout_ref: str, labeling, blend: str, method: str 
     coll = build_take(take, scene, ImportOptions())
     write_labeling(coll, take, load_layout(layout_ref), labeling)
     commit(scene, coll, ReviewState(labeling, Review(), layout_ref, method, temporal))
-    hands = [] if solved is None else solved if isinstance(solved, list) else [("", solved)]
+    hands = as_solves(solved)
     for side, one in hands:
         if side:  # sources as Solve Hand names them, so that solving the take again replaces these rigs
             build_solved_hand(one, solved_hand_collection(scene, f"{coll.name}:{side}", f"{coll.name} {side} hand"),

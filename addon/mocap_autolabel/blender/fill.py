@@ -23,9 +23,11 @@ import bpy
 import numpy as np
 
 from ..core.errors import MocapInputError
-from ..core.fill import fill_gaps, fill_method
+from ..core.fill import fill_method
 from ..core.labeling import labeled_take
+from ..core.process import Outputs, process_take
 from ..core.review import marker_classes
+from ..core.settings import LabelSettings
 from . import animio
 from .markers import finger_of, key_type_values, labeled_object
 from .scene import key_track
@@ -174,8 +176,9 @@ def fill_scene(take_coll: bpy.types.Collection, method: str = "auto", max_gap: f
                 raise MocapInputError(take_coll.name, "has no solved hand to fill from: Solve Hand first (or use "
                                                       "another method)")
             solves = []
-    # fill_gaps solves the calibrated hand first where the method uses it and no solve is given.
-    result = fill_gaps(lab_take, layout, method, max_gap, solves=solves, naming=naming, calibrations=calibrations)
+    # The fill solves the calibrated hand first where the method uses it and no solve is given.
+    outputs = Outputs(label=False, fill=method, max_gap=max_gap, calibrations=calibrations)
+    result = process_take(lab_take, layout, LabelSettings(naming=pattern), outputs, solves=solves).filled
     n = len(labeling.names)
     chosen = sorted(set(range(n) if labels is None else labels))
     for label in chosen:

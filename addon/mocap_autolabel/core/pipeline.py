@@ -113,8 +113,13 @@ def _label_passes(take: Take, layout: Layout, attempt: Attempt, method, mode, fi
             restarted[outcome.reason] = sum(run.times.values())
             run = _restart(run, outcome.attempt)
             continue
+        held = run.share  # the alternative's messages are heard at the share reached
+
+        def heard(message: str, _share: float, held: float = held) -> None:
+            progress(message, held)
+
         alternative = _label_passes(take, layout, outcome.attempt, labeler_method(outcome.attempt.settings.method),
-                                    temporal_mode(outcome.attempt.settings.temporal), None, None, no_progress, cache)
+                                    temporal_mode(outcome.attempt.settings.temporal), None, None, heard, cache)
         chosen = outcome.resolve(alternative)
         if isinstance(chosen, Labeling):
             labeling = chosen

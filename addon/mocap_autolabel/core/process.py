@@ -27,14 +27,14 @@ from .labeling import Labeling, labeled_take
 from .layout import DEFAULT_LAYOUT, Layout, builtin_layouts, layout_for_names, load_layout
 from .pipeline import label_take
 from .settings import Corrections, LabelSettings
-from .solve import HandSolve, solve_hands, solve_take
+from .solve import HandSolve, as_rig, as_solves, solve_hands, solve_take
 from .stages.refine import CLEARLY_BETTER, DOUBTFUL_SHARE
 from .stages.run import Progress, no_progress
 from .take import Take
 
 #: What the front ends (CLI, batch, Blender) use of the core's labeling and solving.
-__all__ = ["LayoutDoubt", "Outputs", "TakeResult", "choose_layout", "layout_doubt", "process_take", "solve_hands",
-           "solve_take", "time_limit_warning"]
+__all__ = ["HandSolve", "LayoutDoubt", "Outputs", "TakeResult", "as_rig", "as_solves", "choose_layout", "layout_doubt",
+           "process_take", "solve_hands", "solve_take", "time_limit_warning"]
 
 #: Frames of the take the other layouts are tried on (about half a second each).
 CHECK_FRAMES = 2000
@@ -115,10 +115,8 @@ class TakeResult:
         return 1 if self.labeling is None else self.labeling.info.get("hands", {}).get("count", 1)
 
     def rig(self) -> HandSolve | list[tuple[str, HandSolve]] | None:
-        """The solve as the scene writers take it: one HandSolve for a plain one-hand take, else the list."""
-        if not self.solves:
-            return None
-        return self.solves[0][1] if [side for side, _ in self.solves] == [""] else self.solves
+        """The solve as the scene writers take it (:func:`.solve.as_rig`)."""
+        return as_rig(self.solves)
 
 
 def choose_layout(take: Take, requested: str | None) -> str:
@@ -196,9 +194,11 @@ def _label(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs
 def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs = Outputs(), *,
                  corrections: Corrections | None = None, previous: Labeling | None = None,
                  labeler: Labeler | None = None, fit: np.ndarray | None = None, start: np.ndarray | None = None,
-                 progress: Progress | None = None, cache: RunCache | None = None) -> TakeResult:
+                 progress: Progress | None = None, cache: RunCache | None = None,
+                 solves: list[tuple[str, HandSolve]] | None = None) -> TakeResult:
     """Label ``take`` (unless it is labeled already), check it, solve the hand(s) and fill the gaps
-    as ``outputs`` asks; the keywords go to :func:`.pipeline.label_take`.
+    as ``outputs`` asks; ``solves`` (``[(side, HandSolve)]``, e.g. a scene's rig) are used instead
+    of solving again. The other keywords go to :func:`.pipeline.label_take`.
 
     Raises:
         MocapInputError: no hand found (the no-hand rule), or a take the steps cannot work with.
@@ -228,13 +228,11 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
     else:
         labeled = take
     naming = _naming(labeling, settings)
-    solves = None
-    if outputs.solve:
+    if outputs.solve and solves is None:
         t = time.perf_counter()
         many = labeling is not None and labeling.info["hands"].get("count", 1) == 2
         progress("solving both hands" if many else "solving the hand", 0.0)
-        solves = solve_hands(labeled, layout, naming, outputs.calibrations,
-                             progress=lambda message, share: progress(message, share), **outputs.solve_options)
+        solves = solve_hands(labeled, layout, naming, outputs.calibrations, progress=progress, **outputs.solve_options)
         seconds["solve"] = round(time.perf_counter() - t, 4)
     filled = None
     if outputs.fill is not None:

@@ -323,36 +323,6 @@ def describe(c: Constraint, label_names: list[str], point_names: list[str], firs
     return f"{what} on {point_names[c.slot]}, frames {c.start + first}-{c.stop - 1 + first}"
 
 
-#: The stages of a labeling, as ``pipeline.label_take`` announces them (the first word of its
-#: progress message), and the share of a first labeling's time each takes (finding the hands: 2 %):
-#: measured on han19 takes
-#: of 1,200 and 10,000 frames with ``set`` and ``vote`` (scoring 0.13 s / 0.81 s, the temporal
-#: decision with its tracklets and crossings 0.10 s / 0.86 s, packing 1 %). The layout check
-#: (:func:`.pipeline.layout_doubt`) costs nothing on a confident take and about 0.5 s a layout on
-#: a doubtful one.
-LABEL_STAGES: tuple[tuple[str, float], ...] = (("finding", 0.02), ("packing", 0.01), ("scoring", 0.46),
-                                               ("temporal", 0.46),
-                                               ("validating", 0.0), ("checking", 0.05))
-
-
-def stage_progress(check_layout: bool = False):
-    """A tracker of a labeling's progress: ``track(message)`` returns ``(line, done)`` for a stage
-    that starts, ``line`` naming it with its number (``"... (stage 2 of 3)"``) and ``done`` the
-    share of the run finished before it (0 at the first stage, from :data:`LABEL_STAGES`)."""
-    stages = [(name, w) for name, w in LABEL_STAGES if name != "validating" and (check_layout or name != "checking")]
-    total = sum(w for _, w in stages)
-    seen: list[int] = []
-
-    def track(message: str) -> tuple[str, float]:
-        word = message.split(" ", 1)[0]
-        k = next((i for i, (name, _) in enumerate(stages) if name == word), seen[-1] if seen else 0)
-        seen.append(k)
-        done = sum(w for _, w in stages[:k]) / total
-        return f"{message} (stage {k + 1} of {len(stages)})", done
-
-    return track
-
-
 @dataclass(frozen=True)
 class BadRun:
     """A run of frames that needs a look: ``[start, stop)`` sample indices, the most uncertain samples

@@ -123,19 +123,45 @@ def solve_take(take: Take, layout: Layout, calibration: Calibration | None = Non
 
 
 def solve_hands(take: Take, layout: Layout, naming: HandNaming | None = None,
-                calibrations: dict[str, Calibration] | None = None, **options) -> list[tuple[str, HandSolve]]:
+                calibrations: dict[str, Calibration] | None = None,
+                progress: Callable[[str, float], None] | None = None, **options) -> list[tuple[str, HandSolve]]:
     """Solve every hand of a labeled take: ``[(side, HandSolve)]``, side ``""`` for a take labeled
     with plain names (one hand), else ``"left"`` / ``"right"`` read off the names
     (:func:`.hands.split_hands`); each hand calibrated on its own (size, side, marker offsets)
-    unless ``calibrations[side]`` is given. ``options`` go to :func:`solve_take`."""
+    unless ``calibrations[side]`` is given (a calibration of the other side is not used).
+    ``progress(message, share)`` hears each hand's stages (each hand about the same work);
+    ``options`` go to :func:`solve_take`."""
+    hands = split_hands(take, layout, naming)
     out = []
-    for side, one in split_hands(take, layout, naming):
+    for i, (side, one) in enumerate(hands):
         given = (calibrations or {}).get(side)
+        if given is not None and side and given.side != side:
+            given = None  # a calibration of the other hand: this one is calibrated on the take
         kwargs = dict(options)
         if side and kwargs.get("side") is None:
             kwargs["side"] = side
+        if progress is not None:
+            def per_hand(message: str, share: float, i: int = i, side: str = side) -> None:
+                progress(f"{side} hand: {message}" if side else message, (i + share) / len(hands))
+
+            kwargs["progress"] = per_hand
         try:
             out.append((side, solve_take(one, layout, calibration=given, **kwargs)))
         except MocapInputError as exc:
             raise MocapInputError(take.source, f"{side} hand: {exc.problem}" if side else exc.problem) from exc
     return out
+
+
+def as_rig(solves: list[tuple[str, HandSolve]] | None) -> HandSolve | list[tuple[str, HandSolve]] | None:
+    """Solves as the scene writers take them: one :class:`HandSolve` for a plain one-hand take
+    (side ``""``), else the ``[(side, HandSolve)]`` list; None for none."""
+    if not solves:
+        return None
+    return solves[0][1] if [side for side, _ in solves] == [""] else solves
+
+
+def as_solves(rig: HandSolve | list[tuple[str, HandSolve]] | None) -> list[tuple[str, HandSolve]]:
+    """The inverse of :func:`as_rig`: always ``[(side, HandSolve)]`` (empty for None)."""
+    if rig is None:
+        return []
+    return rig if isinstance(rig, list) else [("", rig)]

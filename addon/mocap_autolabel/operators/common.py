@@ -1,9 +1,10 @@
 """What the operators share: the take an operator acts on (the panel's, or the selected marker's),
 the messages of their polls, and selecting a marker.
 
-Label, Re-solve, Previous / Next, the lists and Export work on the take in the panel's Take field
-(an import puts the new take there); the corrections (Assign, Swap, Unlabel, Split, Lock,
-Unlock), Fill Gaps and Solve Hand on the take of the selected markers.
+What works on a whole take (Label, Re-solve, Previous / Next, the lists, Export, Solve Hand and
+Fill Gaps) works on the take in the panel's Take field (an import puts the new take there; Fill
+Gaps fills that take's selected markers, or all of them); the corrections (Assign, Swap, Unlabel,
+Split, Lock, Unlock) work on the take of the selected markers.
 """
 
 from __future__ import annotations

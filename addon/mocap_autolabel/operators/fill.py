@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import EnumProperty, FloatProperty
 
-from .common import _not_a_take, _present, reviewed_take
+from .common import _not_a_take, _present, reviewed_panel_take
 
 _METHODS = [
     ("auto", "Auto", "Per gap, the method with the lowest expected error: hand (where solved), pose or spline"),
@@ -33,8 +33,8 @@ class _FillOperator:
 
     @classmethod
     def poll(cls, context):
-        return _present(cls, reviewed_take(context), _not_a_take(context) or "Label a take first (Mocap sidebar tab > "
-                                                                               "Label)")
+        why = _not_a_take(context) or "Label a take first (Mocap sidebar tab > Label)"
+        return _present(cls, reviewed_panel_take(context), why)
 
 
 class MOCAPAL_OT_fill_gaps(_FillOperator, bpy.types.Operator):
@@ -52,7 +52,7 @@ class MOCAPAL_OT_fill_gaps(_FillOperator, bpy.types.Operator):
         from ..blender.fill import fill_scene
         from ..core.errors import MocapInputError
 
-        coll = reviewed_take(context)
+        coll = reviewed_panel_take(context)
         labels = _chosen_labels(context, coll)
         try:
             report = fill_scene(coll, self.method, self.max_gap, labels)
@@ -81,7 +81,7 @@ class MOCAPAL_OT_clear_fill(_FillOperator, bpy.types.Operator):
     def execute(self, context):
         from ..blender.fill import clear_fill
 
-        coll = reviewed_take(context)
+        coll = reviewed_panel_take(context)
         gone = clear_fill(coll, _chosen_labels(context, coll))
         self.report({"INFO"}, f"Cleared {gone} filled samples")
         return {"FINISHED"}

@@ -15,7 +15,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
 
 from ..blender.properties import LAYOUT_DEFAULT, _layouts
 from ..core.hands import SIDES
-from .common import context_take, reviewed_take
+from .common import panel_take, reviewed_panel_take
 from .modal import start_modal
 
 
@@ -41,30 +41,21 @@ class SolveRequest:
         hand); for a take whose labels carry their side (two hands, ``L_ThumbTip`` ...), ``[(side,
         HandSolve)]``, each hand calibrated on its own (a given calibration serves the hand of its
         side). ``say(message)`` gets each stage (and may raise to stop, as a cancelled Job's does)."""
-        from ..core.errors import MocapInputError
-        from ..core.hands import split_hands
-        from ..core.process import solve_take
+        from ..core.process import Outputs, process_take
+        from ..core.settings import LabelSettings
 
-        hands = split_hands(self.take, self.layout, self.naming)
-        out = []
-        for i, (side, one) in enumerate(hands):
-            def progress(message: str, share: float, i=i, side=side) -> None:
-                self.share = (i + share) / len(hands)  # each hand is about the same work
-                if say is not None:
-                    say(f"{side} hand: {message}" if side else message)
+        def progress(message: str, share: float) -> None:
+            self.share = share
+            if say is not None:
+                say(message)
 
-            cal = self.calibration
-            if cal is not None and side and cal.side != side:
-                cal = None  # a calibration of the other hand: this one is calibrated on the take
-            try:
-                solved = solve_take(one, self.layout, calibration=cal, smooth_hz=self.smooth_hz,
-                                    side=side or None, progress=progress)
-            except MocapInputError as exc:
-                if not side:
-                    raise
-                raise MocapInputError(self.source, f"{side} hand: {exc.problem}") from exc
-            out.append((side, solved))
-        return out[0][1] if [side for side, _ in out] == [""] else out
+        cal = self.calibration
+        calibrations = None if cal is None else {"": cal, cal.side: cal}
+        outputs = Outputs(label=False, solve=True, calibrations=calibrations,
+                          solve_options={"smooth_hz": self.smooth_hz})
+        naming = None if self.naming is None else self.naming.template
+        result = process_take(self.take, self.layout, LabelSettings(naming=naming), outputs, progress=progress)
+        return result.rig()
 
 
 def _stage_printer():
@@ -122,12 +113,12 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         if self.filepath:
             path = bpy.path.abspath(self.filepath)
             return read_take(path), chosen_layout(), path, 1.0
-        coll = reviewed_take(context)
+        coll = reviewed_panel_take(context)
         if coll is not None:
             state = load_state(coll)
             return (labeled_take(current_take(coll), state.labeling), state_layout(state), coll.name,
                     float(coll.get("mocap_scale", 1.0)))
-        coll = context_take(context)
+        coll = panel_take(context)
         if coll is not None and coll.get("mocap_source"):
             return current_take(coll), chosen_layout(), coll.name, float(coll.get("mocap_scale", 1.0))
         return None
@@ -147,7 +138,7 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         from ..blender.review import load_state
         from ..core.hands import HandNaming
 
-        coll = None if self.filepath else reviewed_take(context)
+        coll = None if self.filepath else reviewed_panel_take(context)
         if coll is None:
             return None
         pattern = load_state(coll).labeling.info.get("hands", {}).get("naming")
@@ -167,8 +158,9 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         from ..blender.armature import build_solved_hand, solved_hand_collection
         from ..blender.scene import free_name
         from ..core.hands import sided_path
+        from ..core.process import as_solves
 
-        hands = solved if isinstance(solved, list) else [("", solved)]
+        hands = as_solves(solved)
         try:
             if self.save_calibration:
                 for side, one in hands:  # c.json, or c_left.json and c_right.json (as the command line)

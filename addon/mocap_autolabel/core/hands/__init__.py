@@ -10,7 +10,7 @@ that was seen on one hand before the hands met stays on it through the contact.
    from the hand that stayed).
 2. Each tracklet goes to the hand whose centre it stays nearer on average (refined twice with
    centres recomputed from the tracklets); one that is nearly as near to both is offered to both
-   hands, and the joint vote (:func:`.pipeline.label_take`) decides it with the labels.
+   hands, and the joint vote (:func:`..pipeline.label_take`) decides it with the labels.
 3. Where a trajectory truly passes from one hand to the other (a capture-system swap while the
    hands touch), it is cut there.
 4. A hand counts when it holds at least a third of the layout's markers in at least a tenth of

@@ -122,7 +122,7 @@ def identity_swaps(right: np.ndarray, centre: np.ndarray) -> np.ndarray:
 
     Args:
         right: int ``(F, 2)``: each hand's :func:`handedness` per frame.
-        centre: ``(F, 2, 3)`` metres: the hands' centres (:attr:`Hands.centre`, NaN where lost).
+        centre: ``(F, 2, 3)`` metres: the hands' centres (:attr:`.tracking.Hands.centre`, NaN where lost).
     """
     frames = len(right)
     if frames == 0:

@@ -1,0 +1,48 @@
+"""What every command shares: the exit codes, the fill flags' values, the one-line error, bpy, reports."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+#: Exit codes: success, a file failed, bad usage.
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+#: Seconds: the default --max-gap (core.fill.MAX_GAP).
+DEFAULT_MAX_GAP = 1.0
+#: The fill methods (core.fill.METHODS; written out here so that the parser loads no numpy).
+FILL_METHODS = ("auto", "spline", "rigid", "hand", "pca", "pose")
+
+
+def _fail(path: str, exc: BaseException) -> int:
+    from ..core.errors import MocapInputError
+
+    if isinstance(exc, MocapInputError):
+        print(f"error: {exc}", file=sys.stderr)
+    elif isinstance(exc, OSError) and exc.strerror:  # a file that cannot be read or written: say which
+        print(f"error: {exc.filename or path}: {exc.strerror}", file=sys.stderr)
+    else:
+        print(f"error: {path}: unexpected {type(exc).__name__}: {exc}", file=sys.stderr)
+    return EXIT_FAILED
+
+
+def _bpy_or_none(what: str):
+    """The bpy module, or None after telling the user how to get it."""
+    try:
+        import bpy
+    except ImportError:
+        print(f"error: {what} needs Blender: install the bpy module (pip install bpy==5.0.1) "
+              "or run blender -b --python-exit-code 1 -P addon/mocap_autolabel/cli.py -- ...", file=sys.stderr)
+        return None
+    return bpy
+
+
+def _write_report(path: str, report: dict) -> None:
+    """``report`` as JSON at ``path``, whole or not at all (a folder or unwritable path raises OSError)."""
+    from ..core.atomic import atomic_output
+
+    if os.path.isdir(path):  # else the rename fails with a confusing temporary name in the message
+        raise IsADirectoryError(21, "is a folder; give a file name for the report", path)
+    with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(report, fh, indent=1)
+    print(f"  report   {path}")

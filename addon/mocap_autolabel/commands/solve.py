@@ -1,0 +1,106 @@
+"""``solve``: the rigged hand fitted to a labeled take (calibration, IK), and the Blender, FBX and BVH outputs."""
+
+from __future__ import annotations
+
+import sys
+
+from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, _bpy_or_none, _fail, _write_report
+from .progress import _ProgressBar, _solve_progress
+
+
+def _solve(args) -> int:
+    from ..core.errors import MocapInputError
+    from ..core.hand.calibrate import Calibration
+    from ..core.hands import HandNaming, labeled_layout, sided_path, split_hands
+    from ..core.layout import load_layout
+    from ..core.process import solve_hands
+    from ..core.take import read_take
+
+    outputs = (("--blend", args.blend, ".blend"), ("--fbx", args.fbx, ".fbx"), ("--bvh", args.bvh, ".bvh"))
+    for flag, value, ext in outputs:
+        if value and not value.lower().endswith(ext):
+            print(f"mocap_autolabel solve: error: {flag} must name a {ext} file, got {value!r}", file=sys.stderr)
+            return EXIT_USAGE
+    reference = None
+    if args.reference_frames:
+        try:
+            a, b = (int(v) for v in args.reference_frames.split(":"))
+            if not 0 <= a < b:
+                raise ValueError
+        except ValueError:
+            print(f"mocap_autolabel solve: error: --reference-frames must be A:B with 0 <= A < B, "
+                  f"got {args.reference_frames!r}", file=sys.stderr)
+            return EXIT_USAGE
+        reference = range(a, b)
+    contacts = []
+    for item in filter(None, (args.contacts or "").split(",")):
+        frame, _, finger = item.partition(":")
+        if not frame.strip().isdigit() or finger.strip() not in ("index", "middle", "ring", "little"):
+            print(f"mocap_autolabel solve: error: --contacts takes FRAME:FINGER items (finger index, middle, ring "
+                  f"or little), got {item!r}", file=sys.stderr)
+            return EXIT_USAGE
+        contacts.append((int(frame), finger.strip()))
+    bpy = None
+    if args.blend or args.fbx or args.bvh:
+        bpy = _bpy_or_none("solve --blend/--fbx/--bvh")
+        if bpy is None:
+            return EXIT_FAILED
+    bar = _ProgressBar.for_args(args)
+    try:
+        layout = load_layout(args.layout) if args.layout else None
+        calibrations = [Calibration.load(p) for p in args.calibration.split(",")] if args.calibration else []
+        bar.stage(f"reading {args.file}")
+        take = read_take(args.file)
+        if reference is not None and reference.stop > take.n_frames:
+            raise MocapInputError(args.file, f"has {take.n_frames} frames; --reference-frames ends at {reference.stop}")
+        naming = HandNaming(args.hand_names) if args.hand_names else None
+        layout = layout or labeled_layout(take, naming)
+        sides = [side for side, _ in split_hands(take, layout, naming)]
+        if len(sides) > 1 and args.side:
+            raise MocapInputError(args.file, "holds two hands, named by side: --side is for a one-hand take")
+        by_side = {("" if len(sides) == 1 and not sides[0] else c.side): c for c in calibrations}
+        if len(calibrations) > len(sides) or len(by_side) < len(calibrations):
+            raise MocapInputError(args.calibration, f"give one calibration per hand ({len(sides)} in the take)")
+        bar.stage("calibrating and solving the hand" if len(by_side) < len(sides) else "solving the hand")
+        solved = solve_hands(take, layout, naming, by_side, calibrate_seconds=args.calibrate_seconds,
+                             reference=reference, contacts=contacts, side=args.side, smooth_hz=args.smooth_hz,
+                             **_solve_progress(bar))
+    except Exception as exc:
+        bar.close()
+        return _fail(args.file, exc)
+    bar.close()
+    reports = []
+    for side, one in solved:
+        report = one.report() | {"file": args.file} | ({"side": side} if side else {})
+        reports.append(report)
+        cal = one.calibration
+        fps = take.n_frames / max(one.seconds["solve"], 1e-9)
+        print(f"{args.file}: {cal.side} hand {cal.length * 1000:.1f} x {cal.breadth * 1000:.1f} mm on {layout.name}; "
+              f"{report['solved_frames']} of {take.n_frames} frames solved in {one.seconds['solve']:.2f} s "
+              f"({fps:,.0f} frames/s); marker RMS {report['marker_rms_mm']:.2f} mm, "
+              f"{report['frames_over_gate']} frames over the {report['gate_mm']:g} mm gate")
+        if side not in by_side:
+            print(f"  calibrated on {len(cal.frames)} frames: RMS {cal.rms_before * 1000:.2f} -> "
+                  f"{cal.rms_after * 1000:.2f} mm")
+        if args.save_calibration:
+            path = sided_path(args.save_calibration, side)
+            cal.save(path)
+            print(f"  calibration {path}")
+    if bpy is not None:
+        from ..blender.export import write_solved_scene
+        from ..core.quiet import silenced_stdout
+
+        try:  # the labeled markers beside the calibrated, animated rig(s); then .blend, FBX and BVH
+            rigs = solved if solved[0][0] else solved[0][1]
+            with silenced_stdout():  # Blender's and the exporters' own lines name the temporary files
+                written = write_solved_scene(take, rigs, args.blend, args.fbx, args.bvh)
+            for kind, path in written.items():
+                print(f"  {kind:8s} {path}")
+        except Exception as exc:
+            return _fail(args.file, exc)
+    if args.report:
+        try:
+            _write_report(args.report, reports[0] if len(reports) == 1 else {"file": args.file, "hands": reports})
+        except OSError as exc:
+            return _fail(args.file, exc)
+    return EXIT_OK
