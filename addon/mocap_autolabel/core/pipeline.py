@@ -130,8 +130,8 @@ def _label_passes(take: Take, layout: Layout, attempt: Attempt, method, mode, fi
         # None: the current pass goes on from its next stage.
     for key, value in run.attempt.notes:
         labeling.info[key] = value
-    for reason, seconds in restarted.items():
-        labeling.info["seconds"].setdefault("restarted", {})[reason] = round(seconds, 4)
+    if restarted:  # the passes replaced (hands that traded places, props kept out), in seconds
+        labeling.info["seconds"]["restarted"] = round(sum(restarted.values()), 4)
     run.say("labeled", 1.0)
     return labeling
 
