@@ -5,7 +5,8 @@ Exit codes: 0 success, 1 a file failed, 2 bad usage. Errors are one line naming 
 This file is the command line itself: the parser, the checks of flags across commands and the
 dispatch; each command's work is in its module under ``commands/``. Only the standard library and
 ``commands/`` (whose modules import core inside their functions) are imported at module level, so
-``--help`` loads no numpy; run as a script, the file imports the package from beside it first.
+``--help`` loads no numpy; run as a script (no package: ``__package__`` is empty), only the standard
+library, and the bottom of the file imports the package from beside it.
 """
 
 from __future__ import annotations
@@ -14,36 +15,27 @@ import argparse
 import os
 import sys
 
-if __name__ == "__main__":
-    # Run as a script (blender -b -P .../cli.py -- ARGS): import the package from beside us and run its
-    # command line; the rest of this copy is never run (its relative imports need the package).
-    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    from mocap_autolabel.cli import _argv_after_double_dash
-    from mocap_autolabel.cli import main as _main
-
-    sys.exit(_main(_argv_after_double_dash(sys.argv)))
-
-# Below: the package's own modules (never reached when run as a script, hence E402). Each command's
-# function and the shared names moved to commands/ stay importable from here (F401: re-exported).
-from .commands.batch import _batch  # noqa: E402
-from .commands.common import (  # noqa: E402, F401
-    DEFAULT_MAX_GAP,
-    EXIT_FAILED,
-    EXIT_OK,
-    EXIT_USAGE,
-    FILL_METHODS,
-    _bpy_or_none,
-    _fail,
-    _write_report,
-)
-from .commands.fill import _fill  # noqa: E402
-from .commands.import_scene import _import  # noqa: E402
-from .commands.info import _info  # noqa: E402
-from .commands.label import _label  # noqa: E402
-from .commands.progress import _ProgressBar  # noqa: E402, F401
-from .commands.solve import _solve  # noqa: E402
-from .commands.synth import _synth  # noqa: E402
-from .commands.train import _train  # noqa: E402
+if __package__:  # else run as a script (Blender's -P, or re-run by multiprocessing's workers): see the bottom
+    # Each command's function, and the shared names that moved to commands/ (importable from here too).
+    from .commands.batch import _batch
+    from .commands.common import (  # noqa: F401 (re-exported)
+        DEFAULT_MAX_GAP,
+        EXIT_FAILED,
+        EXIT_OK,
+        EXIT_USAGE,
+        FILL_METHODS,
+        _bpy_or_none,
+        _fail,
+        _write_report,
+    )
+    from .commands.fill import _fill
+    from .commands.import_scene import _import
+    from .commands.info import _info
+    from .commands.label import _label
+    from .commands.progress import _ProgressBar  # noqa: F401 (re-exported)
+    from .commands.solve import _solve
+    from .commands.synth import _synth
+    from .commands.train import _train
 
 
 class _Parser(argparse.ArgumentParser):
@@ -289,3 +281,11 @@ def main(argv: list[str] | None = None) -> int:
 
 def _argv_after_double_dash(argv: list[str]) -> list[str]:
     return argv[argv.index("--") + 1:] if "--" in argv else []
+
+
+if __name__ == "__main__":
+    # Run as a script (blender -b -P .../cli.py -- ARGS): import the package from beside us.
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    from mocap_autolabel.cli import main as _main
+
+    sys.exit(_main(_argv_after_double_dash(sys.argv)))
