@@ -25,10 +25,13 @@ import tomllib
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-from .core.cache import RunCache
-from .core.settings import LabelSettings
 from .worker_env import environ, thread_caps
+
+if TYPE_CHECKING:  # batch imports only the standard library at module level (the CLI's --help stays fast)
+    from .core.cache import RunCache
+    from .core.settings import LabelSettings
 
 TAKE_EXTENSIONS = (".c3d", ".trc", ".tsv")
 
@@ -121,6 +124,8 @@ class BatchSettings:
 
     def label_settings(self, **more) -> LabelSettings:
         """The :class:`.core.settings.LabelSettings` of these batch settings (``more``: fields to add)."""
+        from .core.settings import LabelSettings
+
         return LabelSettings(method=self.method, temporal=self.temporal, model=self.model, validate=self.validate,
                              hand_count=self.hands, naming=self.hand_names, **more)
 
@@ -132,6 +137,8 @@ _WORKER_CACHE: list[RunCache] = []
 
 def run_cache() -> RunCache:
     """The batch worker's :class:`.core.cache.RunCache` (made on its first take)."""
+    from .core.cache import RunCache
+
     if not _WORKER_CACHE:
         _WORKER_CACHE.append(RunCache())
     return _WORKER_CACHE[0]

@@ -340,13 +340,22 @@ def test_a_file_that_names_its_points_gives_labeled_empties_the_plain_names(empt
 def test_the_panel_labels_with_the_command_lines_default_layout(empty_scene):
     """A user who imports a take and presses Label gets the layout the CLI and batch use by default
     (han19), not the first layout by name. (cli.py and batch.py import only the standard library
-    at module level, so they spell the name out; this keeps the three in step.)"""
+    at module level, so they spell the name out; this keeps the three in step.) Batch picks each
+    take's layout from its points' names, as Blender's import does, and han19 for unnamed points."""
+    import numpy as np
     from mocap_autolabel.batch import BatchSettings
     from mocap_autolabel.cli import build_parser
-    from mocap_autolabel.core.layout import DEFAULT_LAYOUT
+    from mocap_autolabel.core.layout import DEFAULT_LAYOUT, load_layout
+    from mocap_autolabel.core.process import choose_layout
+    from mocap_autolabel.core.take import Take
 
     assert build_parser().parse_args(["label", "take.c3d"]).layout == DEFAULT_LAYOUT
-    assert BatchSettings().layout == DEFAULT_LAYOUT
+    assert BatchSettings().layout is None
+    unnamed = Take(positions=np.zeros((2, 3, 3), np.float32), names=["*0", "*1", "*2"], rate=120.0)
+    assert choose_layout(unnamed, BatchSettings().layout) == DEFAULT_LAYOUT
+    glove = Take(positions=np.zeros((2, 13, 3), np.float32), names=list(load_layout("glove13").names), rate=120.0)
+    assert choose_layout(glove, None) == "glove13"
+    assert choose_layout(glove, "han19") == "han19"  # the user's choice wins
     assert empty_scene.mocap_autolabel.layout == DEFAULT_LAYOUT
 
 

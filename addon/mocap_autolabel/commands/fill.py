@@ -4,16 +4,17 @@ that ``label --fill`` prints too."""
 from __future__ import annotations
 
 from .common import EXIT_OK, _fail, _write_report
-from .progress import _ProgressBar, _solve_progress
+from .progress import _ProgressBar
 
 
 def _fill(args) -> int:
     from ..core.errors import MocapInputError
-    from ..core.fill import fill_gaps, fill_method
     from ..core.formats.c3d import write_c3d
     from ..core.hand.calibrate import Calibration
     from ..core.hands import HandNaming, labeled_layout, split_hands
     from ..core.layout import load_layout
+    from ..core.process import Outputs, process_take
+    from ..core.settings import LabelSettings
     from ..core.take import read_take
 
     bar = _ProgressBar.for_args(args)
@@ -31,13 +32,11 @@ def _fill(args) -> int:
             calibrations["" if sides == [""] else cal.side] = cal
         if len(calibrations) > len(sides):
             raise MocapInputError(args.calibration, f"give one calibration per hand ({len(sides)} in the take)")
-        if fill_method(args.fill_method).uses_hand:
-            bar.stage("calibrating and solving the hand" if len(calibrations) < len(sides) else "solving the hand")
-        else:
-            bar.stage("filling gaps")
-        # With auto or hand, fill_gaps solves each hand first (its seconds["solve"]).
-        result = fill_gaps(take, layout, args.fill_method, args.max_gap, naming=naming, calibrations=calibrations,
-                           **_solve_progress(bar))
+        bar.stage("filling gaps")
+        # A fill that uses the hand solves it first (its seconds["solve"]), as the progress says.
+        outputs = Outputs(label=False, fill=args.fill_method, max_gap=args.max_gap, calibrations=calibrations)
+        result = process_take(take, layout, LabelSettings(naming=args.hand_names), outputs,
+                              progress=bar).filled
         bar.stage(f"writing {args.output}")
         write_c3d(result.take, args.output)
     except Exception as exc:

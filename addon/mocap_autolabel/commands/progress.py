@@ -79,12 +79,3 @@ class _ProgressBar:
             self.stream.write("\r" + " " * 119 + "\r")
             self.stream.flush()
             self.visible = False
-
-
-def _solve_progress(bar: _ProgressBar) -> dict:
-    """``solve_take``'s progress argument where it has one (stage and share done, 0 to 1)."""
-    import inspect
-
-    from ..core.process import solve_take
-
-    return {"progress": bar} if "progress" in inspect.signature(solve_take).parameters else {}

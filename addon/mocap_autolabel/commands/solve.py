@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 
 from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, _bpy_or_none, _fail, _write_report
-from .progress import _ProgressBar, _solve_progress
+from .progress import _ProgressBar
 
 
 def _solve(args) -> int:
@@ -13,7 +13,8 @@ def _solve(args) -> int:
     from ..core.hand.calibrate import Calibration
     from ..core.hands import HandNaming, labeled_layout, sided_path, split_hands
     from ..core.layout import load_layout
-    from ..core.process import solve_hands
+    from ..core.process import Outputs, process_take
+    from ..core.settings import LabelSettings
     from ..core.take import read_take
 
     outputs = (("--blend", args.blend, ".blend"), ("--fbx", args.fbx, ".fbx"), ("--bvh", args.bvh, ".bvh"))
@@ -62,9 +63,10 @@ def _solve(args) -> int:
         if len(calibrations) > len(sides) or len(by_side) < len(calibrations):
             raise MocapInputError(args.calibration, f"give one calibration per hand ({len(sides)} in the take)")
         bar.stage("calibrating and solving the hand" if len(by_side) < len(sides) else "solving the hand")
-        solved = solve_hands(take, layout, naming, by_side, calibrate_seconds=args.calibrate_seconds,
-                             reference=reference, contacts=contacts, side=args.side, smooth_hz=args.smooth_hz,
-                             **_solve_progress(bar))
+        options = {"calibrate_seconds": args.calibrate_seconds, "reference": reference, "contacts": contacts,
+                   "side": args.side, "smooth_hz": args.smooth_hz}
+        outputs = Outputs(label=False, solve=True, calibrations=by_side, solve_options=options)
+        solved = process_take(take, layout, LabelSettings(naming=args.hand_names), outputs, progress=bar).solves
     except Exception as exc:
         bar.close()
         return _fail(args.file, exc)
