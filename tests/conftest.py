@@ -10,6 +10,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "addon"))
+# The tests live in tests/core (never import bpy) and tests/blender (use the bpy module); the shared
+# modules stay here (helpers.py, fuzzing.py, this conftest), importable by name from either folder.
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 #: ../shared/data beside the repository; MOCAP_DATA overrides.
 DATA = Path(os.environ.get("MOCAP_DATA", ROOT.parent / "shared" / "data"))

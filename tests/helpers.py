@@ -19,6 +19,21 @@ def small_take(frames: int = 50, points: int = 4, seed: int = 0, gaps: bool = Tr
     return Take(positions=positions, names=[f"*{i}" for i in range(points)], rate=100.0, source="small.c3d")
 
 
+def synthetic_takes(folder, count: int, frames: int = 300) -> list:
+    """``count`` raw synthetic han19 takes (seeds 0, 1, ...) written as ``folder/synth<seed>.c3d``; their paths."""
+    from mocap_autolabel.core.formats.c3d import write_c3d
+    from mocap_autolabel.core.layout import load_layout
+    from mocap_autolabel.core.synth.generate import synthesize
+
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for seed in range(count):
+        path = folder / f"synth{seed}.c3d"
+        write_c3d(synthesize(load_layout("han19"), frames, seed=seed).take, path)
+        paths.append(path)
+    return paths
+
+
 # --- the Blender tests' shared steps (bpy is passed in: these helpers import nothing of Blender) ---
 
 def import_take(bpy, path, tmp_path):

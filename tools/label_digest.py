@@ -221,7 +221,7 @@ def two_hand_cases(quick: bool) -> Iterator[Case]:
         from two_hands import han_pairs
 
         for name, seed, a, b in han_pairs(layout):
-            key = name.replace("/", "-")
+            key = f"{seed:04d}-" + name.replace("/", "-")  # names repeat across capture folders: the seed does not
             take, _, _ = corrupt_take(np.concatenate([a, b], axis=1), 120.0, seed=seed)
             yield f"pairs/{key}/two", functools.partial(label, take, layout)
             for j, hand in enumerate((a, b)):
@@ -304,8 +304,12 @@ def run(outdir: Path, quick: bool, only: str | None) -> int:
           f"{'quick' if quick else 'full'} suite -> {outdir}", flush=True)
     t0 = time.perf_counter()
     done = failed = 0
+    seen: set[str] = set()
     for group in GROUPS:
         for name, thunk in group(quick):
+            if name in seen:
+                raise RuntimeError(f"two cases named {name}")
+            seen.add(name)
             if only and only not in name:
                 continue
             t = time.perf_counter()

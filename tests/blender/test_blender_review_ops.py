@@ -18,7 +18,7 @@ from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.review import KEY_TYPES, marker_classes, uncertain_segments
 from mocap_autolabel.core.synth.generate import synthesize
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "samples" / "demo_take.c3d"
 
 

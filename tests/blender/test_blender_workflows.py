@@ -15,7 +15,7 @@ from helpers import save_and_reopen
 from helpers import select as _select
 from mocap_autolabel.core.labeling import EMPTY, NULL
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "samples" / "demo_take.c3d"
 
 

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SOURCE_DIR = ROOT / "addon" / "mocap_autolabel"
 BUILD_SCRIPT = ROOT / "tools" / "build_extension.py"
 DIST_DIR = ROOT / "dist"

@@ -15,7 +15,7 @@ from mocap_autolabel.core.labeling import EMPTY, NULL, unlabeled_point_names
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.review import KEY_TYPES, marker_classes, null_classes, uncertain_segments
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "samples" / "demo_take.c3d"
 FIX_OPERATORS = ("assign_label", "swap_labels", "unlabel", "split", "lock", "unlock", "delete_correction")
 

@@ -13,8 +13,8 @@ class _ProgressBar:
     extra. On a terminal one line is redrawn in place and wiped at the end (stdout keeps only the
     results); elsewhere (a log) a line is written per stage and per tenth of the work.
 
-    Call it as ``bar(message)`` at each stage (``label_take(progress=...)``), ``bar.share(x)``
-    with the share done, 0 to 1 (``label_take(done=...)``), or ``bar(message, share)``.
+    It is a progress callback of the core (``bar(message, share)``: the stage and the share done,
+    0 to 1); ``bar(message)`` and ``bar.stage(message)`` start a stage of the command itself.
     """
 
     DELAY = 1.0  # seconds before anything is drawn
