@@ -5,7 +5,7 @@ As a Blender extension this module registers the operators and UI; as a Python p
 register/unregister, so the core and the CLI work without Blender.
 """
 
-__version__ = "0.1.0"
+from .core.version import __version__ as __version__  # one place: core/version.py
 
 #: Shortcuts of the review, all Shift+Alt+key in the Frames keymap (every editor: the viewport, the
 #: Dope Sheet, the Graph Editor, the Timeline): (operator, key, properties). Blender's default
