@@ -65,9 +65,3 @@ def test_the_tool_sees_function_level_submodule_and_upward_imports(tmp_path):
     assert [(f["file"], f["function"], f["lines"]) for f in report.long_functions] == [("core/sub/c.py", "g", 123)]
     assert tool.main(["--package", str(pkg)]) == 1
 
-
-def test_the_package_version_is_the_one_core_writes():
-    import mocap_autolabel
-    from mocap_autolabel.core.version import __version__
-
-    assert mocap_autolabel.__version__ == __version__
