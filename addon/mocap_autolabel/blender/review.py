@@ -381,6 +381,7 @@ class LabelRequest:
         ``say(message)`` hears each stage as it starts; :attr:`stage` holds that line and
         :attr:`done` the share of the work done (the core's one progress protocol).
         """
+        from ..core.errors import MocapInputError
         from ..core.process import Outputs, process_take
         from ..core.settings import Corrections, LabelSettings
 
@@ -397,9 +398,12 @@ class LabelRequest:
         outputs = Outputs(check_hand=check_layout, check_layout=check_layout, pick_layout=self.pick_layout,
                           layout_hint="Layout {} in the Mocap tab")
         # A re-solve labels again only the frames around what the reviewer changed since.
-        result = process_take(self.take, self.layout, settings, outputs, corrections=corrections,
-                              previous=None if check_layout else self.previous, labeler=self.labeler,
-                              progress=staged, cache=self.cache)
+        try:
+            result = process_take(self.take, self.layout, settings, outputs, corrections=corrections,
+                                  previous=None if check_layout else self.previous, labeler=self.labeler,
+                                  progress=staged, cache=self.cache)
+        except MocapInputError as exc:  # named for the take in the scene, not its file
+            raise MocapInputError(self.take_name, exc.problem) from None
         labeling = result.labeling
         if result.picked:
             self.picked = result.picked

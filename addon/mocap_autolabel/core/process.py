@@ -36,6 +36,8 @@ from .take import Take
 __all__ = ["HandSolve", "LayoutDoubt", "Outputs", "TakeResult", "as_rig", "as_solves", "choose_layout", "layout_doubt",
            "process_take", "solve_hands", "solve_take", "time_limit_warning"]
 
+#: The share of a labeling's work before its layout check (the check labels a short excerpt per layout).
+LABEL_SHARE = 0.95
 #: Frames of the take the other layouts are tried on (about half a second each).
 CHECK_FRAMES = 2000
 
@@ -169,20 +171,26 @@ def _label(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs
            progress: Progress, cache: RunCache, **inputs) -> tuple[Layout, Labeling, LayoutDoubt | None, dict | None]:
     """Label, and where asked check the layout (and pick a better one)."""
     t = time.perf_counter()
-    labeling = label_take(take, layout, settings, progress=progress, cache=cache, **inputs)
+    checked = LABEL_SHARE if outputs.check_layout else 1.0  # the rest of the work: the layout check
+
+    def labeling_progress(message: str, share: float) -> None:
+        progress(message, checked * share)
+
+    labeling = label_take(take, layout, settings, progress=labeling_progress, cache=cache, **inputs)
     result_seconds["label"] = round(time.perf_counter() - t, 4)
     one = labeling.info.get("hands", {}).get("count", 1) == 1
     doubt, picked = None, None
     if outputs.check_layout and one:
-        progress("checking the layout against the other built-in layouts", 1.0)
+        progress("checking the layout against the other built-in layouts", checked)
         doubt = layout_doubt(take, layout, labeling, outputs.confident, cache)
         corrections = inputs.get("corrections")
         corrected = corrections is not None and (corrections.constraints or corrections.splits)
         if doubt and outputs.pick_layout and not corrected:
             # The take's shape says which layout it is: label with that one (the user chose none).
-            progress(f"checking: the take fits {doubt.better} better, labeling with it", 1.0)
+            progress(f"checking: the take fits {doubt.better} better, labeling with it", checked)
             better = load_layout(doubt.better)
-            labeling = label_take(take, better, settings, progress=progress, cache=cache)
+            labeling = label_take(take, better, settings, progress=lambda message, _share: progress(message, checked),
+                                  cache=cache)
             picked = {"from": layout.name, "to": doubt.better, "share": doubt.share,
                       "better_share": doubt.better_share}
             layout, doubt = better, None
@@ -230,8 +238,6 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
     naming = _naming(labeling, settings)
     if outputs.solve and solves is None:
         t = time.perf_counter()
-        many = labeling is not None and labeling.info["hands"].get("count", 1) == 2
-        progress("solving both hands" if many else "solving the hand", 0.0)
         solves = solve_hands(labeled, layout, naming, outputs.calibrations, progress=progress, **outputs.solve_options)
         seconds["solve"] = round(time.perf_counter() - t, 4)
     filled = None
