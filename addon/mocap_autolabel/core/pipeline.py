@@ -19,7 +19,7 @@ from .labelers import Labeler, labeler_method
 from .labeling import Labeling
 from .layout import Layout
 from .settings import Corrections, LabelSettings
-from .stages.decide import decide_stage, temporal_mode
+from .stages.decide import TEMPORAL_MODES, decide_stage, temporal_mode
 from .stages.hands import find_hands_stage, name_sides_stage
 from .stages.refine import one_hand_stage, props_stage, refine_stage, validate_stage
 from .stages.run import Attempt, LabelRun, Progress, Retry, no_progress
@@ -70,7 +70,8 @@ def label_take(take: Take, layout: Layout, settings: LabelSettings = DEFAULT_SET
         if not (0 <= c.slot < take.n_points and 0 <= c.start < c.stop <= take.n_frames):
             raise ValueError(f"constraint {c} lies outside the take ({take.n_frames} frames, {take.n_points} slots)")
     if settings.validate and not mode.allows_validation:
-        raise ValueError(f"validate needs a temporal mode that allows it, not {settings.temporal!r}")
+        allowed = ", ".join(name for name, m in TEMPORAL_MODES.items() if m.allows_validation)
+        raise ValueError(f"validate needs temporal={allowed!r}, not {settings.temporal!r}")
     cache = cache if cache is not None else RunCache()
     progress = progress or no_progress
 
