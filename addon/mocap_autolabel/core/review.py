@@ -3,7 +3,7 @@
 Every correction a reviewer makes is a :class:`~.labeling.Constraint` (or a split point) on
 the take, never an edit of the result: re-solving with all of them reproduces each one exactly
 and lets its consequences propagate (a label taken here is no longer available elsewhere).
-Blender-free: the operators in ``operators/review.py`` only call these.
+Blender-free: the operators (``operators/corrections.py``, ``navigation.py``, ``label.py``) only call these.
 """
 
 from __future__ import annotations
