@@ -34,7 +34,7 @@ from .take import Take
 
 #: What the front ends (CLI, batch, Blender) use of the core's labeling and solving.
 __all__ = ["HandSolve", "LayoutDoubt", "Outputs", "TakeResult", "as_rig", "as_solves", "choose_layout", "layout_doubt",
-           "process_take", "solve_hands", "solve_take", "time_limit_warning"]
+           "layout_from_names", "process_take", "solve_hands", "solve_take", "time_limit_warning"]
 
 #: The share of a labeling's work before its layout check (the check labels a short excerpt per layout).
 LABEL_SHARE = 0.95
@@ -121,13 +121,16 @@ class TakeResult:
         return as_rig(self.solves)
 
 
+def layout_from_names(take: Take) -> str | None:
+    """The built-in layout whose every marker the take's point names hold (:func:`.layout.layout_for_names`),
+    or None; a take of unnamed points (``*N``, ``M001``...) names none (no layout file is read)."""
+    return None if take.unlabeled.all() else layout_for_names(take.names)
+
+
 def choose_layout(take: Take, requested: str | None) -> str:
-    """The layout to label ``take`` with: the one asked for, else the built-in layout whose every
-    marker the take's point names hold, else :data:`.layout.DEFAULT_LAYOUT`."""
-    if requested:
-        return requested
-    picked = None if take.unlabeled.all() else layout_for_names(take.names)
-    return picked or DEFAULT_LAYOUT
+    """The layout to label ``take`` with: the one asked for, else the one its points' names give
+    (:func:`layout_from_names`), else :data:`.layout.DEFAULT_LAYOUT`."""
+    return requested or layout_from_names(take) or DEFAULT_LAYOUT
 
 
 def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: float = 0.95,

@@ -112,13 +112,13 @@ def _pick_layout(context, collection, take) -> str | None:
     an earlier take's pick). Either way the take remembers the Layout the panel shows for it, which
     comes back when the Take field returns to it."""
     from ..blender.properties import LAYOUT_CHOICE, USER_LAYOUT, set_layout
-    from ..core.layout import DEFAULT_LAYOUT, builtin_layouts, layout_for_names
+    from ..core.layout import DEFAULT_LAYOUT, builtin_layouts
+    from ..core.process import layout_from_names
 
     settings = context.scene.mocap_autolabel
     if LAYOUT_CHOICE in collection:
         return None
-    # A file of unnamed points (*N, M001...) names no layout's markers: skip reading every layout file.
-    picked = None if take.unlabeled.all() else layout_for_names(take.names)
+    picked = layout_from_names(take)
     if picked is None:
         if not settings.layout_file:
             # Not another take's pick: the layout the user chose last (han19 where they chose none).
