@@ -101,7 +101,7 @@ def farm_client(scheduler: str, threads_per_worker: int | None = None) -> Iterat
 #: starts without importing Dask and the labeling (about 0.6 s of CPU each, on this 2-core machine
 #: most of what a local cluster cost beyond ``batch --jobs``).
 PRELOAD = ["distributed", "numpy", "scipy.optimize", "scipy.sparse", "onnxruntime", "mocap_autolabel.batch",
-           "mocap_autolabel.core.pipeline"]
+           "mocap_autolabel.core.process"]
 
 
 def _start_forkserver() -> None:

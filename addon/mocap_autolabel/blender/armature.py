@@ -180,7 +180,7 @@ def solved_hand_collection(scene: bpy.types.Scene, source: str, name: str,
 
 def build_solved_hand(solved, collection: bpy.types.Collection | None = None, name: str = "Hand",
                       scale: float = 1.0) -> bpy.types.Object:
-    """The calibrated rig of a :class:`~mocap_autolabel.core.pipeline.HandSolve`, keyed on every solved
+    """The calibrated rig of a :class:`~mocap_autolabel.core.solve.HandSolve`, keyed on every solved
     frame (``solved.first_frame`` on), its markers placed by the calibration; the calibration is kept on
     the armature.
 

@@ -11,7 +11,7 @@ its fills go (the record drops them) and *Fill Gaps* fills them again; a marker 
 its confidence colours keeps them. A re-solve of the hand refills every filled gap with the new
 solve.
 
-The fill is the core's (:func:`core.fill.fill_gaps`); the hand comes from the take's solved rig
+The fill is the core's (:func:`core.process.process_take`); the hand comes from the take's solved rig
 (its calibration, solved again on the current labels), where there is one.
 """
 

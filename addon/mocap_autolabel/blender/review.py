@@ -19,7 +19,7 @@ lookups :mod:`.markers`; the panel's lists :mod:`.lists`. This module writes lab
 result (:func:`finish_label`, :func:`edit`). The names of :mod:`.takes` and :mod:`.markers` stay
 importable from here.
 
-Nothing here decides labels: that is ``core.pipeline`` and ``core.review``.
+Nothing here decides labels: that is ``core.process`` (labeling, checks) and ``core.review``.
 """
 
 from __future__ import annotations

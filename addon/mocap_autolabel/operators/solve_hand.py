@@ -37,7 +37,7 @@ class SolveRequest:
     naming: object = None  # the take's HandNaming (None: any built-in convention)
 
     def run(self, say=None):
-        """The :class:`~mocap_autolabel.core.pipeline.HandSolve` of a take labeled with plain names (one
+        """The :class:`~mocap_autolabel.core.solve.HandSolve` of a take labeled with plain names (one
         hand); for a take whose labels carry their side (two hands, ``L_ThumbTip`` ...), ``[(side,
         HandSolve)]``, each hand calibrated on its own (a given calibration serves the hand of its
         side). ``say(message)`` gets each stage (and may raise to stop, as a cancelled Job's does)."""
