@@ -386,6 +386,7 @@ def test_labeling_with_the_wrong_layout_says_which_fits(labeled, tmp_path):
     assert summary(state(coll).labeling, settings.sure)["layout_doubt"] is None
 
 
+@pytest.mark.slow
 def test_solve_hand_fits_the_reviewed_labels(labeled, tmp_path):
     """Solve Hand after Label (step 9 of the README) solves the labels in the scene, with the layout
     they were made with: the raw file on disk (unlabeled) is neither needed nor read."""
@@ -435,6 +436,7 @@ def test_export_labeled_c3d_and_overlay(labeled, tmp_path):
     assert geo["colors"].shape == (len(geo["points"]), 4) and len(geo["lines"]) % 2 == 0
 
 
+@pytest.mark.slow
 def test_cli_label_writes_a_review_scene_the_panel_adopts(empty_scene, bpy_module, take_file, tmp_path):
     from mocap_autolabel.cli import main
 
@@ -524,15 +526,15 @@ def test_label_a_body_take_is_an_error_and_builds_nothing(empty_scene, bpy_modul
     assert set(bpy.data.collections.keys()) == before and "mocap_labeled" not in coll.keys()
 
 
-def test_label_warns_when_the_vote_hit_its_time_limit(empty_scene, bpy_module, take_file, monkeypatch, capfd):
-    """As the CLI and batch do ('the vote's exclusive assignment stopped at its 3 s limit')."""
+def test_label_warns_when_the_vote_hit_its_work_bound(empty_scene, bpy_module, take_file, monkeypatch, capfd):
+    """As the CLI and batch do ('the vote's exclusive assignment reached its bound of ... nodes')."""
     from mocap_autolabel.core import pipeline, process
 
     real = pipeline.label_take
 
-    def hurried(*args, **kwargs):  # a hand take never reaches the limit: say it did
+    def hurried(*args, **kwargs):  # a hand take never reaches the bound: say it did
         labeling = real(*args, **kwargs)
-        labeling.info["time_limited"] = 2
+        labeling.info["work_limited"] = 2
         return labeling
 
     monkeypatch.setattr(pipeline, "label_take", hurried)
@@ -540,7 +542,7 @@ def test_label_warns_when_the_vote_hit_its_time_limit(empty_scene, bpy_module, t
     bpy_module.ops.mocap_autolabel.import_markers(filepath=str(take_file))
     assert bpy_module.ops.mocap_autolabel.label() == {"FINISHED"}
     out = capfd.readouterr()
-    assert "stopped at its 3 s limit 2 time(s)" in out.out + out.err
+    assert "reached its bound of 1000 search nodes 2 time(s)" in out.out + out.err
 
 
 def test_gmm_labels_in_blender_without_a_fit_take(empty_scene, bpy_module, take_file):

@@ -19,7 +19,7 @@ def _label(args) -> int:
     from ..core.labelers import labeler_method
     from ..core.labeling import layout_markers, unlabeled_point_names
     from ..core.layout import load_layout
-    from ..core.process import Outputs, process_take, time_limit_warning
+    from ..core.process import Outputs, process_take, work_limit_warning
     from ..core.quiet import silenced_stdout
     from ..core.synth.generate import load_truth, truth_path
     from ..core.take import read_take
@@ -111,7 +111,7 @@ def _label(args) -> int:
               f"for review (set is the method whose confident segments can be skipped)")
     if doubt:
         print(f"  warning  {doubt} (--layout {doubt.better})")
-    hurried = time_limit_warning(labeling)
+    hurried = work_limit_warning(labeling)
     if hurried:
         print(f"  warning  {hurried}")
     tpath = truth_path(args.file)

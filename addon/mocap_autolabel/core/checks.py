@@ -12,7 +12,7 @@ from .labelers import labeler_method
 from .labeling import Labeling, labeled_take
 from .layout import Layout
 from .take import Take
-from .temporal.voting import MILP_SECONDS
+from .temporal.voting import MILP_NODES
 
 
 @dataclass(frozen=True)
@@ -125,10 +125,11 @@ def hand_checks(take: Take, layout: Layout, labeling: Labeling,
             for h, side in enumerate(hands["sides"])]
 
 
-def time_limit_warning(labeling: Labeling) -> str | None:
-    """A one-line warning when the vote's assignment was stopped by its time limit, else None."""
-    stopped = labeling.info.get("time_limited", 0)
+def work_limit_warning(labeling: Labeling) -> str | None:
+    """A one-line warning when the vote's exclusive assignment reached its work bound, else None."""
+    stopped = labeling.info.get("work_limited", 0)
     if not stopped:
         return None
-    return (f"the vote's exclusive assignment stopped at its {MILP_SECONDS:g} s limit {stopped} time(s): the "
-            f"labels are the best found by then (takes of hands need far less; is this a hand?)")
+    return (f"the vote's exclusive assignment reached its bound of {MILP_NODES} search nodes {stopped} time(s): "
+            f"the labels are the best found within it, never worse than a greedy labeling (takes of hands need "
+            f"one node; is this a hand?)")

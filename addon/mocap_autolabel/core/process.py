@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from .cache import RunCache
-from .checks import HandCheck, LayoutDoubt, hand_checks, time_limit_warning
+from .checks import HandCheck, LayoutDoubt, hand_checks, work_limit_warning
 from .errors import MocapInputError
 from .fill import MAX_GAP, fill_gaps
 from .hand.calibrate import Calibration
@@ -34,7 +34,7 @@ from .take import Take
 
 #: What the front ends (CLI, batch, Blender) use of the core's labeling and solving.
 __all__ = ["HandSolve", "LayoutDoubt", "Outputs", "TakeResult", "as_rig", "as_solves", "choose_layout", "layout_doubt",
-           "layout_from_names", "process_take", "solve_hands", "solve_take", "time_limit_warning"]
+           "layout_from_names", "process_take", "solve_hands", "solve_take", "work_limit_warning"]
 
 #: The share of a labeling's work before its layout check (the check labels a short excerpt per layout).
 LABEL_SHARE = 0.95
@@ -231,7 +231,7 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
                 said = [f"{side} hand: " * bool(side) + check.describe(outputs.layout_hint) for side, check in checks]
                 raise MocapInputError(take.source, "; ".join(said + ([hint] if hint else [])))
             warnings += [f"{side} hand: {check}" for side, check in checks if not check.found]
-        warnings += [str(w) for w in (doubt, time_limit_warning(labeling)) if w]
+        warnings += [str(w) for w in (doubt, work_limit_warning(labeling)) if w]
         if facts.get("forced") == 2:
             warnings.append("two hands were forced, one was found")
         if facts.get("warning"):

@@ -186,7 +186,7 @@ def _join(take: Take, parts: list[Labeling], bounds, cuts: list[int], names: lis
         for key, value in p.info.get("seconds", {}).items():
             seconds[key] = round(seconds.get(key, 0.0) + value, 4)
     info["seconds"] = seconds
-    info["time_limited"] = sum(p.info.get("time_limited", 0) for p in parts)
+    info["work_limited"] = sum(p.info.get("work_limited", 0) for p in parts)
     hands = dict(info.get("hands", {}))
     hands["count"] = max(p.info.get("hands", {}).get("count", 1) for p in parts)
     if len(parts) > 1:  # each window's hands in its own order: a re-solve hands them back

@@ -121,9 +121,9 @@ class MOCAPAL_OT_label(bpy.types.Operator):
             self.report({"WARNING"}, f"{request.take_name}: {s['hands_warning']}")
         if s["layout_doubt"]:
             self.report({"WARNING"}, f"{request.take_name}: {s['layout_doubt']}")
-        from ..core.process import time_limit_warning
+        from ..core.process import work_limit_warning
 
-        hurried = time_limit_warning(labeling)  # as the CLI and batch warn
+        hurried = work_limit_warning(labeling)  # as the CLI and batch warn
         if hurried:
             self.report({"WARNING"}, f"{request.take_name}: {hurried}")
         return {"FINISHED"}

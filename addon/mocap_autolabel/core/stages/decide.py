@@ -119,7 +119,7 @@ class Vote(TemporalMode):
         rigid = labels.rigid_pairs() if partner and any(partner) else None
         with_rigid, with_continuity = rigid is not None and len(rigid) > 0, any(continuity)
         if first is not None and (with_rigid or with_continuity):
-            facts = {"time_limited": 0}
+            facts = {"work_limited": 0}
             ids = first.segment_ids()[samples.frame, samples.slot]
             per = np.where(ids >= 0, first.label[np.maximum(ids, 0)], NULL).astype(np.int64)
             held = np.where(ids >= 0, first.length[np.maximum(ids, 0)], 0)
@@ -141,11 +141,11 @@ class Vote(TemporalMode):
             extra = self._evidence(run, samples, per, held, member, rigid if with_rigid else None,
                                    partner, continuity if with_continuity else None)
             if extra.any() or first is not None or rescored is not None:
-                stopped = facts["time_limited"]
+                stopped = facts["work_limited"]
                 # Summed in float64 at once: the vote sums in float64 (one copy fewer of a large array).
                 total = np.add(samples.logp, extra, dtype=np.float64)
                 decided, label, seg, facts = self._vote(run, replace(samples, logp=total))
-                facts["time_limited"] += stopped
+                facts["work_limited"] += stopped
         run.info.update(facts)
         first_locked = run.locked_at[decided.start, decided.slot]
         return Labeling(names=labels.names, n_frames=take.n_frames, n_points=take.n_points,

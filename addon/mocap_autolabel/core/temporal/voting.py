@@ -200,15 +200,17 @@ def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: s
     raise ValueError(f"unknown voting score {score!r}: 'likelihood' or 'power'")
 
 
-#: Seconds the integer programme may take per solve. Hand takes need at most 0.12 s (the 316
-#: han2018 raw takes; synthetic ones of 20,000 and 100,000 frames); a body take labeled as a hand
-#: can run to the limit in every solve (S01_Pronetokneel01: 141 s at 60 s). At the limit, HiGHS's
-#: best labeling so far is used, and the vote refines no further.
-MILP_SECONDS = 3.0
+#: Branch-and-bound nodes the integer programme may explore per solve: a bound on its work, never
+#: on its time, so that the same take gives the same labels on any machine under any load. Hand
+#: takes need one node (the root relaxation is integral on the han2018 raw takes, the glove and
+#: the two-hand benchmark's); a body take labeled as a hand can need far more. Where the bound
+#: stops the solver, the better of its best labeling so far and the greedy one is used, and the
+#: vote refines no further.
+MILP_NODES = 1000
 
 
 def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[int, int] | None = None,
-                         candidates: int | None = None, time_limit: float = MILP_SECONDS,
+                         candidates: int | None = None, node_limit: int = MILP_NODES,
                          switch: np.ndarray | None = None, facts: dict | None = None) -> np.ndarray:
     """The best label per segment (:data:`NULL` allowed) such that no two segments that overlap
     in time share a label. ``locked`` fixes some segments' labels.
@@ -225,7 +227,8 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
             ``s - 1``'s, where the two are pieces of one trajectory (see :func:`switch_costs`); 0
             where they are not. A piece may then take any label that some piece of its trajectory
             finds useful.
-        facts: if given, ``facts["time_limited"]`` counts the solves stopped by ``time_limit``.
+        node_limit: branch-and-bound nodes a solve may explore (:data:`MILP_NODES`).
+        facts: if given, ``facts["work_limited"]`` counts the solves stopped by ``node_limit``.
 
     Returns:
         int64 ``(S,)`` labels.
@@ -268,9 +271,9 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     sub_locked = {int(index[s]): lab for s, lab in locked.items() if inside[s]}
     sub_segments = Segments(segments.slot[sub], segments.start[sub], segments.stop[sub])
     out[sub], stopped = _milp_assignment(weights[sub], sub_segments, index[var_seg[keep_var]], var_lab[keep_var],
-                                         sub_locked, time_limit, switch[sub])
+                                         sub_locked, node_limit, switch[sub])
     if facts is not None:
-        facts["time_limited"] = facts.get("time_limited", 0) + int(stopped)
+        facts["work_limited"] = facts.get("work_limited", 0) + int(stopped)
     return np.where(out == m, NULL, out)
 
 
@@ -297,10 +300,11 @@ def _best_chains(weights: np.ndarray, switch: np.ndarray) -> np.ndarray:
 
 
 def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarray, var_lab: np.ndarray,
-                     locked: dict[int, int], time_limit: float, switch: np.ndarray) -> tuple[np.ndarray, bool]:
+                     locked: dict[int, int], node_limit: int, switch: np.ndarray) -> tuple[np.ndarray, bool]:
     """The exclusive assignment as an integer programme over the candidate (segment, label) pairs
     (and one switch variable per paid link between pieces of a trajectory); returns labels with
-    null as ``M``, and whether the time limit stopped the solver."""
+    null as ``M``, and whether the work bound stopped the solver (then the better of its labeling
+    and :func:`_greedy_assignment`'s)."""
     n, m1 = weights.shape
     m = m1 - 1
     n_pairs = len(var_seg)
@@ -357,17 +361,59 @@ def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarra
     cost = np.concatenate([-weights[var_seg, var_lab], switch[links]])
     integrality = np.concatenate([np.ones(n_pairs), np.zeros(len(links))])  # switches follow the labels
     res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=integrality,
-               bounds=Bounds(lower, np.ones(n_vars)), options={"time_limit": time_limit})
-    out = np.full(n, m, dtype=np.int64)
+               bounds=Bounds(lower, np.ones(n_vars)), options={"node_limit": int(node_limit)})
+    if res.status in (2, 3):  # all null but the locks is always a labeling: never here
+        raise ValueError(f"no exclusive labeling exists: {res.message}")
+    stopped = res.status != 0  # the work bound (HiGHS's node or solution limit) stopped the search
+    greedy = _greedy_assignment(weights, segments, var_seg, var_lab, locked, switch) if stopped else None
     if res.x is None:
-        if res.status != 1:  # 1: the time limit, before any labeling was found
-            raise ValueError(f"no exclusive labeling exists: {res.message}")
-        for s, label in locked.items():  # all null but the locks: exclusive, as the locks are
-            out[s] = m if label == NULL else label
-        return out, True
+        return greedy, True
+    out = np.full(n, m, dtype=np.int64)
     chosen = res.x[:n_pairs] > 0.5
     out[var_seg[chosen]] = var_lab[chosen]
-    return out, res.status == 1
+    if greedy is not None and _objective(weights, greedy, switch) > _objective(weights, out, switch):
+        out = greedy
+    return out, stopped
+
+
+def _objective(weights: np.ndarray, labels: np.ndarray, switch: np.ndarray) -> float:
+    """The integer programme's objective of ``labels`` ``(S,)`` (null as ``M``): the weights taken,
+    less the switches paid between linked pieces that differ."""
+    taken = weights[np.arange(len(labels)), labels].sum()
+    linked = np.flatnonzero(switch > 0)
+    return float(taken - switch[linked][labels[linked] != labels[linked - 1]].sum())
+
+
+def _greedy_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarray, var_lab: np.ndarray,
+                       locked: dict[int, int], switch: np.ndarray) -> np.ndarray:
+    """An exclusive labeling (null as ``M``) without search: the locks, then the candidate
+    (segment, label) pairs by how much they beat null, best first (ties by segment and label),
+    each taken where its segment is still free and no overlapping segment holds the label. The
+    floor a bounded solve never falls below; deterministic."""
+    n, m1 = weights.shape
+    m = m1 - 1
+    out = np.full(n, -1, dtype=np.int64)
+    held: dict[int, list[tuple[int, int]]] = {}  # label -> frame ranges taken
+
+    def free(label: int, s: int) -> bool:
+        a, b = int(segments.start[s]), int(segments.stop[s])
+        return all(b <= lo or hi <= a for lo, hi in held.get(label, ()))
+
+    for s, label in sorted(locked.items()):
+        out[s] = m if label == NULL else label
+        if label != NULL:
+            held.setdefault(label, []).append((int(segments.start[s]), int(segments.stop[s])))
+    real = var_lab < m
+    gain = weights[var_seg[real], var_lab[real]] - weights[var_seg[real], m]
+    order = np.lexsort((var_lab[real], var_seg[real], -gain))
+    for i in order.tolist():
+        s, label = int(var_seg[real][i]), int(var_lab[real][i])
+        if gain[i] <= 0 or out[s] >= 0 or not free(label, s):
+            continue
+        out[s] = label
+        held.setdefault(label, []).append((int(segments.start[s]), int(segments.stop[s])))
+    out[out < 0] = m
+    return out
 
 
 def _interacting_groups(var_seg: np.ndarray, var_lab: np.ndarray, segments: Segments, m: int,
@@ -472,7 +518,7 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
     if swaps:
         segments = split_segments(segments, swaps)
         seg = segment_of(segments, samples.frame, samples.slot)
-    facts = {"swaps_split": int(sum(len(v) for v in swaps.values())), "refined": 0, "time_limited": 0}
+    facts = {"swaps_split": int(sum(len(v) for v in swaps.values())), "refined": 0, "work_limited": 0}
     if score == "likelihood":  # summed in float64 in every round: convert once
         samples = replace(samples, logp=samples.logp.astype(np.float64, copy=False))
     while True:
@@ -483,7 +529,7 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
         switch = switch_costs(segments, free, crossing_at, switch_cost)
         labels = exclusive_assignment(weights, segments, locked, switch=switch, facts=facts)
         labels[(count == 0) & (first_locked < NULL)] = NULL  # never scored (beyond the cap): no evidence
-        if facts["refined"] >= refine or facts["time_limited"]:  # refining a hurried solve is more of the same
+        if facts["refined"] >= refine or facts["work_limited"]:  # refining a bounded solve is more of the same
             break
         cuts = _clash_cuts(weights, labels, segments, first_locked >= NULL)
         if not cuts:
