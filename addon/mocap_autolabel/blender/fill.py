@@ -23,7 +23,6 @@ import bpy
 import numpy as np
 
 from ..core.errors import MocapInputError
-from ..core.fill import fill_method
 from ..core.labeling import labeled_take
 from ..core.process import Outputs, process_take
 from ..core.review import marker_classes
@@ -158,27 +157,20 @@ def fill_scene(take_coll: bpy.types.Collection, method: str = "auto", max_gap: f
     Raises:
         MocapInputError: ``hand`` was asked and the take has no solved hand.
     """
-    from ..core.hands import HandNaming, hands_in_names
-
     state = load_state(take_coll)
     layout = state_layout(state)
     labeling = state.labeling
     take = current_take(take_coll)
     lab_take = labeled_take(take, labeling)
     pattern = labeling.info.get("hands", {}).get("naming")
-    naming = HandNaming(pattern) if pattern else None
-    calibrations = {}
-    if solves is None and fill_method(method).uses_hand:
-        calibrations = take_calibrations(take_coll)
-        sides = set(hands_in_names(lab_take.names, layout, naming))
-        if not (sides and sides <= set(calibrations)):  # no calibrated hand to solve
-            if fill_method(method).needs_hand:
-                raise MocapInputError(take_coll.name, "has no solved hand to fill from: Solve Hand first (or use "
-                                                      "another method)")
-            solves = []
-    # The fill solves the calibrated hand first where the method uses it and no solve is given.
-    outputs = Outputs(label=False, fill=method, max_gap=max_gap, calibrations=calibrations)
-    result = process_take(lab_take, layout, LabelSettings(naming=pattern), outputs, solves=solves).filled
+    # The take's rig is solved again on the current labels with its calibration; Solve Hand
+    # calibrates, the fill does not.
+    outputs = Outputs(label=False, fill=method, max_gap=max_gap, calibrations=take_calibrations(take_coll),
+                      calibrate=False)
+    try:
+        result = process_take(lab_take, layout, LabelSettings(naming=pattern), outputs, solves=solves).filled
+    except MocapInputError as exc:  # named for the take in the scene
+        raise MocapInputError(take_coll.name, exc.problem) from None
     n = len(labeling.names)
     chosen = sorted(set(range(n) if labels is None else labels))
     for label in chosen:

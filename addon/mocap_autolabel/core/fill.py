@@ -1000,7 +1000,7 @@ class TakeFill:
 
 
 def fill_gaps(take: Take, layout: Layout, method: str = "auto", max_gap: float = MAX_GAP,
-              solves: list | None = None, naming=None, **solve_options) -> TakeFill:
+              solves: list | None = None, naming=None, calibrate: bool = True, **solve_options) -> TakeFill:
     """Fill the gaps of every labeled hand of ``take`` (one hand with plain layout names, or two
     named by side, :func:`.hands.hands_in_names`); other points are left as they are.
 
@@ -1012,6 +1012,9 @@ def fill_gaps(take: Take, layout: Layout, method: str = "auto", max_gap: float =
         solves: ``[(side, HandSolve)]`` as :func:`.solve.solve_hands` gives for this take; None
             solves here when the method may use the hand (``hand``, ``auto``); ``[]``: no hand.
         naming: how two hands' names carry their side (:class:`.hands.HandNaming`).
+        calibrate: a hand with no calibration in ``solve_options["calibrations"]`` is calibrated
+            on the take; False: without a calibration for every hand the fill goes without the
+            hand (``hand`` refuses).
         solve_options: passed to :func:`.solve.solve_hands` when solving here.
 
     Raises:
@@ -1026,10 +1029,15 @@ def fill_gaps(take: Take, layout: Layout, method: str = "auto", max_gap: float =
     split_hands(take, layout, naming)  # a take that is not labeled with the layout: one clear error
     found = hands_in_names(take.names, layout, naming)
     seconds = {}
-    if solves is None and fill_method(method).uses_hand:
-        t0 = time.perf_counter()
-        solves = solve_hands(take, layout, naming, **solve_options)
-        seconds["solve"] = round(time.perf_counter() - t0, 4)
+    if solves is None and fill_method(method).uses_hand:  # the one place of "solve the hand before the fill"
+        calibrations = solve_options.get("calibrations") or {}
+        if calibrate or set(found) <= set(calibrations):
+            t0 = time.perf_counter()
+            solves = solve_hands(take, layout, naming, **solve_options)
+            seconds["solve"] = round(time.perf_counter() - t0, 4)
+        elif fill_method(method).needs_hand:
+            raise MocapInputError(take.source, "has no solved hand to fill from: Solve Hand first (or use another "
+                                               "method)")
     by_side = dict(solves or [])
     t0 = time.perf_counter()
     partners = layout_partners(layout)

@@ -57,6 +57,8 @@ class Outputs:
         max_gap: seconds; longer gaps stay open.
         calibrations: per side (``""`` for one hand, ``left``, ``right``) a performer's calibration
             to solve with instead of calibrating on the take.
+        calibrate: calibrate a hand that has no calibration; False: a fill goes without the hand
+            unless every hand has one (Blender's Fill Gaps: Solve Hand calibrates, not the fill).
         solve_options: keywords of :func:`.solve.solve_take` (calibrate_seconds, reference,
             contacts, side, smooth_hz).
         confident: the confidence a segment needs to count as confident in the checks.
@@ -72,6 +74,7 @@ class Outputs:
     fill: str | None = None
     max_gap: float = MAX_GAP
     calibrations: dict[str, Calibration] | None = None
+    calibrate: bool = True
     solve_options: dict = field(default_factory=dict)
     confident: float = 0.95
     layout_hint: str = "--layout {}"
@@ -249,7 +252,7 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
         progress("filling gaps", 0.0)
         # A fill that uses the hand solves it first where it is not solved yet (:func:`.fill.fill_gaps`).
         filled = fill_gaps(labeled, layout, outputs.fill, outputs.max_gap, solves=solves, naming=naming,
-                           calibrations=outputs.calibrations, **outputs.solve_options)
+                           calibrate=outputs.calibrate, calibrations=outputs.calibrations, **outputs.solve_options)
         if solves is None and filled.solves:
             solves = filled.solves
         seconds["fill"] = round(time.perf_counter() - t, 4)
