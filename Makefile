@@ -13,7 +13,7 @@ BENCH_EXTRAS := blender,bench
 TRAIN_EXTRAS := train
 EXT_EXTRAS   := blender
 
-.PHONY: venv demo test lint bench extension sample models clean test-bpy42
+.PHONY: venv demo test test-fast lint bench extension sample models clean test-bpy42
 
 $(VENV)/.created:
 	$(PYTHON) -m venv $(VENV)
@@ -51,6 +51,10 @@ demo: $(VENV)/.extras-$(DEMO_EXTRAS)
 ## test: ruff, then every test (real-data tests skip when ../shared/data is absent)
 test: $(VENV)/.extras-$(TEST_EXTRAS) lint
 	$(BIN)/python -m pytest
+
+## test-fast: ruff, then every test but those marked slow (over about 5 s each); make test runs them all
+test-fast: $(VENV)/.extras-$(TEST_EXTRAS) lint
+	$(BIN)/python -m pytest -m "not slow"
 
 lint: $(VENV)/.extras-$(LINT_EXTRAS)
 	$(BIN)/ruff check .
@@ -91,6 +95,6 @@ clean:
 test-bpy42:
 	$(PYTHON) -m venv .venv42
 	.venv42/bin/python -m pip install -q "bpy==4.2.0" "numpy==1.26.4" ezc3d c3d onnxruntime scipy pytest
-	.venv42/bin/python -m pytest -q tests/test_blender_import.py tests/test_cli.py tests/test_blender_hand.py \
-		tests/test_blender_solve.py tests/test_blender_review.py tests/test_blender_scene33.py \
-		tests/test_blender_pointcloud.py
+	.venv42/bin/python -m pytest -q tests/blender/test_blender_import.py tests/core/test_cli.py \
+		tests/blender/test_cli_blender.py tests/blender/test_blender_hand.py tests/blender/test_blender_solve.py \
+		tests/blender/test_blender_review.py tests/blender/test_blender_scene33.py tests/blender/test_blender_pointcloud.py

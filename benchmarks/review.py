@@ -158,7 +158,7 @@ def main() -> None:
     for name, values in rows.items():
         lines.append(f"| {name} | {np.median(values):.3f} | {len(values)} |")
     lines += ["", f"After the edits the take holds {constraints} constraints and one split; every re-solve "
-              "keeps them (tests/test_blender_review.py checks it).", "",
+              "keeps them (tests/blender/test_blender_review.py checks it).", "",
               "Bars: label + colour of a 10,000-frame han19 take at most 5 s, re-solve under 1 s (issue 7, one "
               "hand); re-solve after a correction under 1.5 s (issue 32, two hands). A re-solve labels again "
               "only the frames within 5 s of the corrections changed since the last labeling "

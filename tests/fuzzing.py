@@ -1,8 +1,9 @@
 """A mutation fuzzer over the real corpus: C3D, TRC and Qualisys TSV files, damaged on purpose.
 
-Used by ``tests/test_fuzz.py`` (a seeded sample) and ``benchmarks/fuzz.py`` (100,000+ cases);
-not part of the add-on. A case is one seed file with one to three mutations, rebuilt from
-``(master seed, case index)`` alone, so any case can be reproduced from the report.
+Used by ``tests/core/test_fuzz.py`` (a seeded sample), ``tests/blender/test_fuzz_blender.py`` (through
+Blender's import operator) and ``benchmarks/fuzz.py`` (100,000+ cases); not part of the add-on. A
+case is one seed file with one to three mutations, rebuilt from ``(master seed, case index)`` alone,
+so any case can be reproduced from the report.
 
 A case fails when reading it raises anything but :class:`MocapInputError`, when a warning
 (numpy's included) escapes the reader, when the Take it returns holds an infinite coordinate

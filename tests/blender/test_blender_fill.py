@@ -163,6 +163,7 @@ def test_a_new_solve_refills_the_gaps_filled_from_the_hand(labeled):
     assert np.abs(after - before).max() > 1e-4
 
 
+@pytest.mark.slow
 def test_hand_fill_after_solve_hand_fills_from_the_solved_rig(labeled):
     """The whole path: Solve Hand (a real calibration and solve), then Fill Gaps with the hand: the
     rig's calibration is solved again on the labels and every gap inside a label's span is filled

@@ -50,6 +50,7 @@ def _no_numbered_duplicates(bpy):
 
 # --- bug 3: Solve Hand ignores the import Scale ------------------------------------------------------
 
+@pytest.mark.slow
 def test_solve_hand_lives_in_the_takes_scale_and_frames(empty_scene, bpy_module, take_file):
     """Imported at Scale 100 with a Frame Offset, labeled and solved: the rig's markers sit on the labeled
     empties (in Blender units, at the same Blender frames), not 100x smaller at the file's frames."""
@@ -172,6 +173,7 @@ def test_star_numbers_in_the_export_are_the_scenes(empty_scene, bpy_module, take
     np.testing.assert_array_equal(np.flatnonzero(back.valid[:, 19]) + FIRST, frames.astype(int))
 
 
+@pytest.mark.slow
 def test_two_takes_in_one_scene_never_clash(empty_scene, bpy_module, take_file, tmp_path):
     """A second take (here the same file again) labeled and solved beside the first gets its own names,
     documented as "<take>:<name>", never Blender's ".001"."""
@@ -226,6 +228,7 @@ def test_uncertain_counts_agree_with_the_cli_and_unlabeled_ones_are_reviewable(e
 
 # --- Solve Hand runs like Label: progress, Esc cancels and leaves the scene as it was --------------
 
+@pytest.mark.slow
 def test_solve_hand_reports_progress_and_a_cancel_leaves_the_scene_unchanged(empty_scene, bpy_module, take_file):
     """The modal Solve Hand runs SolveRequest.run on a Job (headless Blender has no window for the modal
     loop itself): the shares it reports rise to 1, and a cancel stops the solve with nothing built."""

@@ -174,6 +174,7 @@ def test_relabel_tools_work_across_both_hands_and_re_solve_keeps_them(labeled, c
     assert [c.name for c in coll["mocap_labeled"].children] == ["Left hand", "Right hand"]
 
 
+@pytest.mark.slow
 def test_save_and_reopen_keep_both_hands_then_solve_and_export(labeled, tmp_path):
     bpy, coll = labeled
     lab = _state(coll).labeling
@@ -211,6 +212,7 @@ def test_save_and_reopen_keep_both_hands_then_solve_and_export(labeled, tmp_path
     assert np.allclose(hands[1][1].positions[f, 3], raw.positions[f, s], atol=1e-4)
 
 
+@pytest.mark.slow
 def test_cli_review_scene_holds_both_hands(bpy_module, two_hands, tmp_path, capsys):
     from mocap_autolabel.cli import main
 
@@ -243,6 +245,7 @@ def test_a_held_prop_is_kept_out_of_the_hands_in_blender(empty_scene, bpy_module
     assert line.startswith("1 rigid prop kept out of the hands")
 
 
+@pytest.mark.slow
 def test_hands_that_traded_places_stay_put_back_through_review(empty_scene, bpy_module, tmp_path):
     """A long take of interacting hands whose tracker swaps them for a stretch: Label Markers puts
     them back and says where, in scene frames; a correction's re-solve, save and reopen keep it."""

@@ -157,3 +157,12 @@ def test_batch_runs_as_a_blender_script(tmp_path):
                            "--jobs", "2", "--quiet"], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert "2 ok, 0 failed, 0 skipped" in done.stdout
+
+
+def test_two_hands_forced_on_a_one_hand_take_label_the_one_it_holds_and_say_so(tmp_path):
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    write_c3d(synthesize(load_layout("han19"), 300, seed=9).take, takes / "forced.c3d")
+    forced = run_batch([str(takes / "forced.c3d")], str(tmp_path / "forced"), BatchSettings(hands="2"),
+                       progress="none")
+    assert forced["ok"] == 1 and "two hands were forced, one was found" in forced["takes_detail"][0]["warning"]

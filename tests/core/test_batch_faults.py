@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from conftest import ROOT
 from helpers import run_killing_a_worker, same_outputs
+from helpers import synthetic_takes as _synthetic
 from mocap_autolabel.batch import BatchSettings, run_batch
-from test_batch import _synthetic
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +56,7 @@ def test_a_full_disk_reports_the_takes_and_a_rerun_completes(undisturbed, tmp_pa
     assert same_outputs(undisturbed / "one", out) == ["synth0", "synth1", "synth2"]
 
 
-@pytest.mark.parametrize("mode", ["jobs", "dask"])
+@pytest.mark.parametrize("mode", ["jobs", pytest.param("dask", marks=pytest.mark.slow)])
 def test_a_worker_killed_at_a_random_point_loses_nothing(undisturbed, tmp_path, mode):
     """Two seeded random points per mode (a pool of 2 processes; a local Dask cluster of 2 workers)."""
     if mode == "dask":

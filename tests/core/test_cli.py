@@ -116,6 +116,7 @@ def test_label_errors(capsys, tmp_path):
     assert "no_such_layout" in capsys.readouterr().err and not (tmp_path / "x.c3d").exists()
 
 
+@pytest.mark.slow
 def test_train_command_writes_a_model_and_card(tmp_path, capsys):
     pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch==2.13.0)")
     pytest.importorskip("onnx", reason="onnx is not installed")
@@ -136,7 +137,8 @@ def test_train_command_writes_a_model_and_card(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("parts", [("c3d", "ezc3d-testFiles", "Vicon.c3d"),
-                                   ("c3d", "auto-marker-label", "data", "S01_Pronetokneel01_mksrem.c3d")])
+                                   pytest.param(("c3d", "auto-marker-label", "data", "S01_Pronetokneel01_mksrem.c3d"),
+                                                marks=pytest.mark.slow)])
 def test_label_a_body_take_fails_with_batchs_no_hand_rule(parts, capsys, tmp_path):
     """Body captures (no hand) used to exit 0 with body markers named as fingers; now the CLI applies
     batch's rule: one error line, exit 1, nothing written."""

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 from conftest import ROOT
 from helpers import same_outputs
+from helpers import synthetic_takes as _synthetic
 from mocap_autolabel.batch import BatchSettings, run_batch
 from mocap_autolabel.cli import main
-from test_batch import _synthetic
 
 pytest.importorskip("distributed", reason="Dask's distributed is not installed (pip install distributed)")
 import dask  # noqa: E402  (installed with distributed)

@@ -20,6 +20,7 @@ def _seeds():
     return SEEDS
 
 
+@pytest.mark.slow
 def test_a_seeded_sample_of_mutated_real_files_reads_or_is_refused_cleanly(tmp_path):
     seeds = _seeds()
     cuts = len(fuzzing.truncations(seeds))

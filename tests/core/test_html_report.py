@@ -11,10 +11,10 @@ import subprocess
 
 import numpy as np
 import pytest
+from helpers import synthetic_takes as _synthetic
 from mocap_autolabel.cli import main
 from mocap_autolabel.core.labeling import Labeling
 from mocap_autolabel.core.overview import ABSENT, CONFIDENT, FILLED, GAP, UNCERTAIN, VERY_UNCERTAIN, label_classes
-from test_batch import _synthetic
 
 GREEN = (0x2E, 0x9E, 0x4F)  # html_report.COLOURS[CONFIDENT]
 
@@ -41,6 +41,7 @@ def _has_green(png: bytes) -> float:
     return float((np.abs(rgb - GREEN).max(axis=-1) <= 2).mean())
 
 
+@pytest.mark.slow
 def test_batch_pages_in_a_headless_browser(tmp_path):
     pytest.importorskip("matplotlib", reason="matplotlib is not installed (pip install matplotlib)")
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")

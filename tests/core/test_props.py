@@ -1,6 +1,7 @@
 """Rigid props among the trajectories (core/props.py) and in label_take."""
 
 import numpy as np
+import pytest
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.props import rigid_groups
 from mocap_autolabel.core.synth.props import _rotation
@@ -35,6 +36,7 @@ def test_rigid_groups_find_the_prop_and_not_the_moving_fingers():
     assert slots == [[0, 1, 2, 3]]
 
 
+@pytest.mark.slow
 def test_a_prop_that_took_hand_labels_is_kept_out_and_named_in_the_info():
     from mocap_autolabel.core.pipeline import label_take
     from mocap_autolabel.core.settings import LabelSettings

@@ -141,6 +141,7 @@ def test_identity_swaps_follow_the_handedness_where_the_hands_can_trade():
     assert swap_frames([[300, 450]], frames).sum() == 150
 
 
+@pytest.mark.slow
 def test_hands_that_trade_places_where_they_touch_keep_their_sides(han19):
     """A long take of interacting hands where the tracker carries each hand's identity on with
     the other for a third of the take (seen before the fix: 66 % of instances right)."""
@@ -229,20 +230,28 @@ def test_split_hands_refuses_a_take_without_the_layouts_names(han19):
         split_hands(take, han19)
 
 
-def test_each_hand_is_solved_with_its_own_size_and_side(han19, apart):
+@pytest.fixture(scope="module")
+def apart_solved(han19, apart):
+    """``apart`` labeled and both its hands solved: ``{side: HandSolve}`` (each hand one calibration)."""
     lab = label_take(apart.take, han19)
-    solved = dict(solve_hands(labeled_take(apart.take, lab), han19))
-    assert set(solved) == {"left", "right"}
-    for side, truth in zip(("left", "right"), apart.hands):
-        cal = solved[side].calibration
-        assert cal.side == side
-        assert abs(cal.length - truth.hand.length) < 0.01
-        # About as good as solving the hand's true (noise-free, never hidden) markers alone.
-        alone = Take(positions=truth.markers.astype(np.float32), names=han19.names, rate=apart.take.rate)
-        best = solve_take(alone, han19).fit.overall_rms()
-        assert solved[side].fit.overall_rms() < 1.2 * best + 0.004  # + the noise of the observed markers
+    return dict(solve_hands(labeled_take(apart.take, lab), han19))
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("hand", [0, 1], ids=["left", "right"])
+def test_each_hand_is_solved_with_its_own_size_and_side(han19, apart, apart_solved, hand):
+    assert set(apart_solved) == {"left", "right"}
+    side, truth = ("left", "right")[hand], apart.hands[hand]
+    cal = apart_solved[side].calibration
+    assert cal.side == side
+    assert abs(cal.length - truth.hand.length) < 0.01
+    # About as good as solving the hand's true (noise-free, never hidden) markers alone.
+    alone = Take(positions=truth.markers.astype(np.float32), names=han19.names, rate=apart.take.rate)
+    best = solve_take(alone, han19).fit.overall_rms()
+    assert apart_solved[side].fit.overall_rms() < 1.2 * best + 0.004  # + the noise of the observed markers
+
+
+@pytest.mark.slow
 def test_synth_two_hands_cli_label_and_solve(tmp_path, capsys):
     take = tmp_path / "two.c3d"
     assert main(["synth", "--hands", "2", "--frames", "300", "--seed", "4", "-o", str(take)]) == 0

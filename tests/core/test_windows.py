@@ -111,6 +111,7 @@ def test_a_two_hand_re_solve_keeps_each_windows_sides(han19):
     assert again.locked[(again.slot == c.slot) & (again.start < c.stop) & (again.stop > c.start)].all()
 
 
+@pytest.mark.slow
 def test_the_label_command_labels_a_long_take_in_windows(han19, tmp_path):
     """A take longer than a window through the label command: one labeled C3D, windows reported."""
     import json
