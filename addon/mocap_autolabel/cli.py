@@ -24,6 +24,8 @@ if __package__:  # else run as a script (Blender's -P, or re-run by multiprocess
         EXIT_OK,
         EXIT_USAGE,
         FILL_METHODS,
+        LABEL_METHODS,
+        TEMPORAL_MODES,
         _bpy_or_none,
         _fail,
         _write_report,
@@ -89,9 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
     lab.add_argument("file", metavar="FILE", help="the raw take (C3D, TRC or Qualisys TSV)")
     lab.add_argument("-o", "--output", metavar="OUT.c3d",
                      help="labeled C3D: the layout's points by name, then the unassigned samples as *N points")
-    lab.add_argument("--method", default="set", choices=("set", "perm", "cnn", "gmm", "nearest"),
+    lab.add_argument("--method", default=LABEL_METHODS[0], choices=LABEL_METHODS,
                      help="per-frame labeler (default: set, ours)")
-    lab.add_argument("--temporal", default="vote", choices=("vote", "viterbi", "none"),
+    lab.add_argument("--temporal", default=TEMPORAL_MODES[0], choices=TEMPORAL_MODES,
                      help="vote: one label per tracklet segment (default); viterbi: N-best + Kalman (Alexanderson); "
                           "none: per-frame labels")
     lab.add_argument("--vote", default="likelihood", choices=("likelihood", "power"),
@@ -173,9 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="settings file (the keys of the flags below, e.g. layout = \"han19\"); flags override it")
     bat.add_argument("--layout", help="built-in layout name or a layout .toml (default han19)")
     bat.add_argument("--model", metavar="MODEL.onnx", help="ONNX model (default: the shipped one)")
-    bat.add_argument("--method", choices=("set", "perm", "cnn", "gmm", "nearest"),
+    bat.add_argument("--method", choices=LABEL_METHODS,
                      help="per-frame labeler (default set; gmm fits on the layout's synthetic range of motion)")
-    bat.add_argument("--temporal", choices=("vote", "viterbi", "none"), help="temporal mode (default vote)")
+    bat.add_argument("--temporal", choices=TEMPORAL_MODES, help="temporal mode (default vote)")
     bat.add_argument("--validate", action="store_true", default=None, help="IK validation of the labels")
     bat.add_argument("--confident", type=float, help="confidence counted as confident in reports (default 0.95)")
     bat.add_argument("--solve-hand", action="store_true", default=None, help="also fit the hand; RMS in the report")
@@ -218,7 +220,7 @@ def _fill_arguments(parser: argparse.ArgumentParser, flag: str | None = None) ->
     if flag:
         parser.add_argument(flag, action="store_true", help="also fill the labeled markers' gaps in -o's C3D "
                                                             "(marked as computed; see the fill command)")
-    parser.add_argument("--fill-method" if flag else "--method", dest="fill_method", default="auto",
+    parser.add_argument("--fill-method" if flag else "--method", dest="fill_method", default=FILL_METHODS[0],
                         choices=FILL_METHODS,
                         help="auto (default: per gap the method with the lowest expected error of hand, pose "
                              "and spline), spline, rigid, hand (the calibrated, solved hand), pca, or pose (read "

@@ -209,3 +209,16 @@ def test_label_says_why_perm_and_cnn_leave_every_segment_for_review(method, caps
     assert main(["label", str(ROOT / "samples" / "demo_take.c3d"), "--method", method]) == 0
     out = capsys.readouterr().out  # a hand take: labeled (their low per-frame probabilities found no hand before)
     assert f"note     {method} + vote never rates a segment confident on han19" in out
+
+
+def test_the_command_lines_choices_are_the_registries():
+    """The command line spells the methods out (its --help imports no numpy); they must be the
+    registries' names, in the registries' order (the first is the default)."""
+    from mocap_autolabel.commands.common import FILL_METHODS, LABEL_METHODS, TEMPORAL_MODES
+    from mocap_autolabel.core.fill import FILL_METHODS as FILLS
+    from mocap_autolabel.core.labelers import LABELERS
+    from mocap_autolabel.core.process import TEMPORAL_MODES as MODES
+
+    assert LABEL_METHODS == tuple(LABELERS) and TEMPORAL_MODES == tuple(MODES) and FILL_METHODS == tuple(FILLS)
+    args = main.__globals__["build_parser"]().parse_args(["label", "take.c3d"])
+    assert (args.method, args.temporal, args.fill_method) == (LABEL_METHODS[0], TEMPORAL_MODES[0], FILL_METHODS[0])

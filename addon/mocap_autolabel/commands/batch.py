@@ -6,7 +6,7 @@ import importlib.util
 import os
 import sys
 
-from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, FILL_METHODS, _bpy_or_none, _fail
+from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, FILL_METHODS, _allows_validation, _bpy_or_none, _fail
 
 
 def _batch(args) -> int:
@@ -49,7 +49,7 @@ def _batch(args) -> int:
 
         print(f"error: {NO_MATPLOTLIB}", file=sys.stderr)
         return EXIT_FAILED
-    if settings.validate and settings.temporal != "vote":
+    if settings.validate and not _allows_validation(settings.temporal):
         print("mocap_autolabel batch: error: --validate needs --temporal vote", file=sys.stderr)
         return EXIT_USAGE
     if settings.needs_blender():

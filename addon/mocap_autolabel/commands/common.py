@@ -12,6 +12,11 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 DEFAULT_MAX_GAP = 1.0
 #: The fill methods (core.fill.METHODS; written out here so that the parser loads no numpy).
 FILL_METHODS = ("auto", "spline", "rigid", "hand", "pca", "pose")
+#: The labeling methods and temporal modes, the first of each the default. The command line spells
+#: the registries' names out (``--help`` imports no numpy); a test keeps them equal to the registries
+#: (``core.labelers.LABELERS``, ``core.stages.decide.TEMPORAL_MODES``, ``core.fill.FILL_METHODS``).
+LABEL_METHODS = ("set", "perm", "cnn", "gmm", "nearest")
+TEMPORAL_MODES = ("vote", "viterbi", "none")
 
 
 def _fail(path: str, exc: BaseException) -> int:
@@ -46,3 +51,10 @@ def _write_report(path: str, report: dict) -> None:
     with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
         json.dump(report, fh, indent=1)
     print(f"  report   {path}")
+
+
+def _allows_validation(temporal: str) -> bool:
+    """Whether IK validation works with the temporal mode ``temporal`` (its registry's capability)."""
+    from ..core.process import TEMPORAL_MODES as MODES
+
+    return MODES[temporal].allows_validation

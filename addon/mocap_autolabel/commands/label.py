@@ -7,7 +7,17 @@ import importlib.util
 import os
 import sys
 
-from .common import DEFAULT_MAX_GAP, EXIT_FAILED, EXIT_OK, EXIT_USAGE, _bpy_or_none, _fail, _write_report
+from .common import (
+    DEFAULT_MAX_GAP,
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_USAGE,
+    FILL_METHODS,
+    _allows_validation,
+    _bpy_or_none,
+    _fail,
+    _write_report,
+)
 from .fill import _fill_line, _print_open_gaps
 from .progress import _ProgressBar
 
@@ -30,7 +40,7 @@ def _label(args) -> int:
     if not (1 <= args.n_best <= 100 and args.p > 0):
         print("mocap_autolabel label: error: --n-best must be 1 to 100 and --p positive", file=sys.stderr)
         return EXIT_USAGE
-    if args.validate and args.temporal != "vote":
+    if args.validate and not _allows_validation(args.temporal):
         print("mocap_autolabel label: error: --validate needs --temporal vote", file=sys.stderr)
         return EXIT_USAGE
     if args.blend and not args.blend.lower().endswith(".blend") or args.solve_hand and not args.blend:
@@ -40,7 +50,7 @@ def _label(args) -> int:
     if args.fill and not args.output:
         print("mocap_autolabel label: error: --fill needs -o OUT.c3d (the filled, labeled take)", file=sys.stderr)
         return EXIT_USAGE
-    if not args.fill and (args.fill_method != "auto" or args.max_gap != DEFAULT_MAX_GAP):
+    if not args.fill and (args.fill_method != FILL_METHODS[0] or args.max_gap != DEFAULT_MAX_GAP):
         print("mocap_autolabel label: error: --fill-method and --max-gap are for --fill (add it to fill the gaps)",
               file=sys.stderr)
         return EXIT_USAGE

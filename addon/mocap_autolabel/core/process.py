@@ -28,13 +28,15 @@ from .layout import DEFAULT_LAYOUT, Layout, builtin_layouts, layout_for_names, l
 from .pipeline import label_take
 from .settings import Corrections, LabelSettings
 from .solve import HandSolve, as_rig, as_solves, solve_hands, solve_take
+from .stages.decide import TEMPORAL_MODES
 from .stages.refine import CLEARLY_BETTER, DOUBTFUL_SHARE
 from .stages.run import Progress, no_progress
 from .take import Take
 
 #: What the front ends (CLI, batch, Blender) use of the core's labeling and solving.
-__all__ = ["HandSolve", "LayoutDoubt", "Outputs", "TakeResult", "as_rig", "as_solves", "choose_layout", "layout_doubt",
-           "layout_from_names", "process_take", "solve_hands", "solve_take", "work_limit_warning"]
+__all__ = ["TEMPORAL_MODES", "HandSolve", "LayoutDoubt", "Outputs", "TakeResult", "as_rig", "as_solves",
+           "choose_layout", "layout_doubt", "layout_from_names", "process_take", "solve_hands", "solve_take",
+           "work_limit_warning"]
 
 #: The share of a labeling's work before its layout check (the check labels a short excerpt per layout).
 LABEL_SHARE = 0.95
