@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import errno
+import functools
 import glob
 import io
 import json
@@ -130,18 +131,13 @@ class BatchSettings:
                              hand_count=self.hands, naming=self.hand_names, **more)
 
 
-#: This process's results kept between its takes (loaded models, fitted range-of-motion labelers):
-#: one per batch worker, gone with it.
-_WORKER_CACHE: list[RunCache] = []
-
-
+@functools.cache
 def run_cache() -> RunCache:
-    """The batch worker's :class:`.core.cache.RunCache` (made on its first take)."""
+    """The batch worker's :class:`.core.cache.RunCache`: its results kept between its takes
+    (loaded models, fitted range-of-motion labelers), made on its first take, gone with the worker."""
     from .core.cache import RunCache
 
-    if not _WORKER_CACHE:
-        _WORKER_CACHE.append(RunCache())
-    return _WORKER_CACHE[0]
+    return RunCache()
 
 
 def find_takes(inputs: list[str]) -> list[tuple[str, str]]:

@@ -71,7 +71,3 @@ class RunCache:
     def entries(self, kind: str) -> dict[Hashable, Any]:
         """The live dictionary of ``kind`` (for callers that keep lists under one key)."""
         return self._kinds.setdefault(kind, {})
-
-    def clear(self) -> None:
-        self._kinds.clear()
-        self._keys.clear()

@@ -77,8 +77,8 @@ def label_take(take: Take, layout: Layout, settings: LabelSettings = DEFAULT_SET
 
     def label_whole(part: Take, part_settings: LabelSettings, part_corrections: Corrections,
                     part_progress: Progress) -> Labeling:
-        return _label_passes(part, layout, Attempt(part_settings, part_corrections, labeler), method, mode,
-                             fit, start, part_progress, cache)
+        return _label_passes(part, layout, Attempt(part_settings, part_corrections, labeler), fit, start,
+                             part_progress, cache)
 
     labeling = None
     if previous is not None and corrections.exclude is None and not settings.validate and method.relabels_locally:
@@ -93,15 +93,13 @@ def label_take(take: Take, layout: Layout, settings: LabelSettings = DEFAULT_SET
     return labeling
 
 
-def _label_passes(take: Take, layout: Layout, attempt: Attempt, method, mode, fit, start, progress: Progress,
-                  cache: RunCache) -> Labeling:
+def _label_passes(take: Take, layout: Layout, attempt: Attempt, fit: np.ndarray | None, start: np.ndarray | None,
+                  progress: Progress, cache: RunCache) -> Labeling:
     """The stages over ``take`` until a pass finishes; a stage's :class:`Retry` either replaces the
     pass (a new attempt) or labels an alternative first and lets its ``resolve`` choose."""
     t0 = time.perf_counter()
-    scored, decided = (0.5, 0.7) if attempt.settings.validate else (0.7, 1.0)
-    run = LabelRun(take, layout, attempt, method, mode, fit, start, progress, cache, scored, decided,
-                   labeler=attempt.labeler)
-    restarted: dict[str, float] = {}  # seconds spent on passes that were replaced, by reason
+    run = _new_run(take, layout, attempt, fit, start, progress, cache)
+    restarted = 0.0  # seconds spent on passes that were replaced
     while True:
         outcome = _advance(run)
         if isinstance(outcome, Labeling):
@@ -111,37 +109,37 @@ def _label_passes(take: Take, layout: Layout, attempt: Attempt, method, mode, fi
             break
         run.say(outcome.reason)
         if outcome.resolve is None:
-            restarted[outcome.reason] = sum(run.times.values())
-            run = _restart(run, outcome.attempt)
+            restarted += sum(run.times.values())
+            run = _new_run(take, layout, outcome.attempt, fit, start, progress, cache)
             continue
         held = run.share  # the alternative's messages are heard at the share reached
 
         def heard(message: str, _share: float, held: float = held) -> None:
             progress(message, held)
 
-        alternative = _label_passes(take, layout, outcome.attempt, labeler_method(outcome.attempt.settings.method),
-                                    temporal_mode(outcome.attempt.settings.temporal), None, None, heard, cache)
+        alternative = _label_passes(take, layout, outcome.attempt, None, None, heard, cache)
         chosen = outcome.resolve(alternative)
         if isinstance(chosen, Labeling):
             labeling = chosen
             labeling.info["seconds"]["total"] = round(time.perf_counter() - t0, 4)
             break
         if isinstance(chosen, Attempt):
-            run = _restart(run, chosen)
+            run = _new_run(take, layout, chosen, fit, start, progress, cache)
         # None: the current pass goes on from its next stage.
     for key, value in run.attempt.notes:
         labeling.info[key] = value
     if restarted:  # the passes replaced (hands that traded places, props kept out), in seconds
-        labeling.info["seconds"]["restarted"] = round(sum(restarted.values()), 4)
+        labeling.info["seconds"]["restarted"] = round(restarted, 4)
     run.say("labeled", 1.0)
     return labeling
 
 
-def _restart(run: LabelRun, attempt: Attempt) -> LabelRun:
-    """A new pass over the same take with ``attempt``."""
-    return LabelRun(run.take, run.layout, attempt, labeler_method(attempt.settings.method),
-                    temporal_mode(attempt.settings.temporal), run.fit, run.start, run.progress, run.cache,
-                    run.scored_share, run.decided_share, labeler=attempt.labeler)
+def _new_run(take: Take, layout: Layout, attempt: Attempt, fit: np.ndarray | None, start: np.ndarray | None,
+             progress: Progress, cache: RunCache) -> LabelRun:
+    """A pass over ``take`` with ``attempt``: its labeler and temporal mode from the registries."""
+    settings = attempt.settings
+    return LabelRun(take, layout, attempt, labeler_method(settings.method), temporal_mode(settings.temporal), fit,
+                    start, progress, cache, labeler=attempt.labeler)
 
 
 def _advance(run: LabelRun) -> Labeling | Retry:

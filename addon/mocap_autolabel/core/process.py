@@ -117,10 +117,6 @@ class TakeResult:
         """The take to write: filled where it was, else labeled."""
         return self.filled.take if self.filled is not None else self.labeled
 
-    @property
-    def hand_count(self) -> int:
-        return 1 if self.labeling is None else self.labeling.info.get("hands", {}).get("count", 1)
-
     def rig(self) -> HandSolve | list[tuple[str, HandSolve]] | None:
         """The solve as the scene writers take it (:func:`.solve.as_rig`)."""
         return as_rig(self.solves)

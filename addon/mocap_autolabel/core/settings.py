@@ -92,9 +92,6 @@ class LabelSettings:
         """A copy with ``changes`` (:func:`dataclasses.replace`)."""
         return replace(self, **changes)
 
-    def as_info(self) -> dict:
-        """The settings a labeling records in its ``info``: JSON-friendly values only."""
-        return {"method": self.method, "temporal": self.temporal}
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ from ..hands import (
 from ..labelers import LABELERS
 from ..labeling import NULL, Labeling
 from ..layout import Layout
+from ..settings import Corrections, LabelSettings
 from ..take import Take
 from ..temporal.partners import RigidPairs, rigid_pairs
 from ..temporal.voting import check_constraints
@@ -128,9 +129,9 @@ def find_hands_stage(run: LabelRun) -> Retry | None:
     constraints = list(corrections.constraints)
     check_constraints(constraints, len(run.labels))
     if found.count == 2 and constraints and settings.sides is None:
-        first = Attempt(type(settings)(method=settings.method, temporal=settings.temporal, model=settings.model,
-                                       hand_count=2, keep_named=settings.keep_named, naming=settings.naming),
-                        type(corrections)(hand_swaps=hand_swaps))
+        first = Attempt(LabelSettings(method=settings.method, temporal=settings.temporal, model=settings.model,
+                                      hand_count=2, keep_named=settings.keep_named, naming=settings.naming),
+                        Corrections(hand_swaps=hand_swaps))
 
         def with_sides(labeled: Labeling) -> Attempt:
             facts = labeled.info["hands"]

@@ -67,9 +67,6 @@ class LabelRun:
     start: np.ndarray | None = None
     progress: Progress = no_progress
     cache: RunCache = field(default_factory=RunCache)
-    # Shares of the work at the scoring's end and at the decision's end.
-    scored_share: float = 0.7
-    decided_share: float = 1.0
     times: dict[str, float] = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     # find_hands
@@ -86,6 +83,7 @@ class LabelRun:
     segments: Any = None
     stride: int = 1
     labeler: Labeler | None = None
+    joint: np.ndarray | None = None  # (F, K, labels + 1) before the corrections are applied
     scores: np.ndarray | None = None  # (F, K, labels + 1)
     hand_scores: list | None = None  # two hands: each hand's (F, K, M + 1)
     scored_members: list | None = None
@@ -98,7 +96,6 @@ class LabelRun:
     labeling: Labeling | None = None
     next_stage: int = 0
     share: float = 0.0
-    started: float = field(default_factory=time.perf_counter)
 
     @property
     def settings(self) -> LabelSettings:
@@ -107,6 +104,16 @@ class LabelRun:
     @property
     def corrections(self) -> Corrections:
         return self.attempt.corrections
+
+    @property
+    def scored_share(self) -> float:
+        """The share of the work done once the frames are scored (IK validation costs a calibration)."""
+        return 0.5 if self.settings.validate else 0.7
+
+    @property
+    def decided_share(self) -> float:
+        """The share of the work done once the temporal decision is made."""
+        return 0.7 if self.settings.validate else 1.0
 
     def say(self, message: str, share: float | None = None) -> None:
         """Progress: ``message`` at ``share`` (None: the share reached so far)."""

@@ -220,7 +220,6 @@ def score_stage(run: LabelRun) -> None:
         run.stride = settings.stride
     run.timed("pack", t)
 
-    run.say(f"scoring {take.n_frames} frames with {settings.method}")
     t = time.perf_counter()
     run.say(f"scoring {take.n_frames} frames with {settings.method}", 0.02)
     if found.count == 2:
