@@ -200,7 +200,7 @@ def _label(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs
             layout, doubt = better, None
     if doubt:
         labeling.info["layout_doubt"] = asdict(doubt)  # in the report, and in the review scene's panel
-    progress("labeled", 1.0)
+    progress("labeled and checked", 1.0)
     return layout, labeling, doubt, picked
 
 
