@@ -171,8 +171,9 @@ def _naming(labeling: Labeling | None, settings: LabelSettings) -> HandNaming | 
     return HandNaming(pattern) if pattern else None
 
 
-def _label(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs, result_seconds: dict,
-           progress: Progress, cache: RunCache, **inputs) -> tuple[Layout, Labeling, LayoutDoubt | None, dict | None]:
+def _label(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs, corrections: Corrections,
+           result_seconds: dict, progress: Progress, cache: RunCache,
+           **inputs) -> tuple[Layout, Labeling, LayoutDoubt | None, dict | None]:
     """Label, and where asked check the layout (and pick a better one)."""
     t = time.perf_counter()
     checked = LABEL_SHARE if outputs.check_layout else 1.0  # the rest of the work: the layout check
@@ -180,16 +181,15 @@ def _label(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs
     def labeling_progress(message: str, share: float) -> None:
         progress(message, checked * share)
 
-    labeling = label_take(take, layout, settings, progress=labeling_progress, cache=cache, **inputs)
+    labeling = label_take(take, layout, settings, corrections=corrections, progress=labeling_progress, cache=cache,
+                          **inputs)
     result_seconds["label"] = round(time.perf_counter() - t, 4)
     one = labeling.info.get("hands", {}).get("count", 1) == 1
     doubt, picked = None, None
     if outputs.check_layout and one:
         progress("checking the layout against the other built-in layouts", checked)
         doubt = layout_doubt(take, layout, labeling, outputs.confident, cache)
-        corrections = inputs.get("corrections")
-        corrected = corrections is not None and (corrections.constraints or corrections.splits)
-        if doubt and outputs.pick_layout and not corrected:
+        if doubt and outputs.pick_layout and not (corrections.constraints or corrections.splits):
             # The take's shape says which layout it is: label with that one (the user chose none).
             progress(f"checking: the take fits {doubt.better} better, labeling with it", checked)
             better = load_layout(doubt.better)
@@ -221,9 +221,9 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
     seconds: dict[str, float] = {}
     labeling, doubt, picked, checks, warnings = None, None, None, [], []
     if outputs.label:
-        inputs = {"corrections": corrections or Corrections(), "previous": previous, "labeler": labeler,
-                  "fit": fit, "start": start}
-        layout, labeling, doubt, picked = _label(take, layout, settings, outputs, seconds, progress, cache, **inputs)
+        layout, labeling, doubt, picked = _label(take, layout, settings, outputs, corrections or Corrections(), seconds,
+                                                 progress, cache, previous=previous, labeler=labeler, fit=fit,
+                                                 start=start)
         labeled = labeled_take(take, labeling)
         facts = labeling.info["hands"]
         if outputs.check_hand:
