@@ -8,9 +8,11 @@ import sys
 
 from mocap_autolabel.core.layout import load_layout
 
+from .any_layout import AnyRecipe, card_summary, export_any, train_any
 from .recipes import SHIPPED_LAYOUTS, recipe
 from .train import export, train
 
+CHECKPOINT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "checkpoints", "set_any.pt")
 MODELS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "addon", "mocap_autolabel", "models")
 
 
@@ -19,8 +21,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--all", action="store_true", help="every shipped model (set, perm, cnn for han19 and glove13)")
     ap.add_argument("--method", action="append", choices=["set", "perm", "cnn"])
     ap.add_argument("--layout", action="append", help="built-in layout name or .toml")
+    ap.add_argument("--any", action="store_true",
+                    help="the layout-conditioned set model (set_any), resumable from its checkpoint")
+    ap.add_argument("--checkpoint", default=CHECKPOINT, help="set_any's checkpoint (resumed when present)")
     ap.add_argument("--out", default=MODELS, help="folder for <method>_<layout>.onnx and .json")
     args = ap.parse_args(argv)
+    if args.any or args.all:
+        r = AnyRecipe()
+        print(f"training set for any layout: {r.steps} steps (checkpoint {args.checkpoint})", file=sys.stderr)
+        net, metrics = train_any(r, checkpoint=args.checkpoint)
+        path = os.path.join(args.out, "set_any.onnx")
+        card = export_any(net, r, metrics, path)
+        print(f"wrote {path}: synthetic validation {card_summary(card)}", file=sys.stderr)
+        if args.any and not (args.method or args.layout):
+            return 0
     methods = args.method or (["set", "perm", "cnn"] if args.all else ["set"])
     layouts = args.layout or list(SHIPPED_LAYOUTS)
     for layout_name in layouts:

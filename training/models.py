@@ -104,6 +104,11 @@ class SetLabeler(nn.Module):
                 sinkhorn=log_sinkhorn_dustbin) -> torch.Tensor:
         """``axes``: ``(B, 3, 3)`` principal axes of each frame's cloud (columns, largest variance first);
         ``sinkhorn``: its log-domain form (training) or the scaling form (export), same result."""
+        x = self.encode_points(points, mask, axes)
+        return self.match(x, mask, self.labels[None], self.label_null[None], sinkhorn)
+
+    def encode_points(self, points: torch.Tensor, mask: torch.Tensor, axes: torch.Tensor) -> torch.Tensor:
+        """The observations' vectors ``(B, K, D)``, normalised, from their geometry alone."""
         b, k, _ = points.shape
         n = mask.sum(dim=1, keepdim=True)
         centroid = (points * mask[:, :, None]).sum(1, keepdim=True) / n[:, :, None]
@@ -122,17 +127,30 @@ class SetLabeler(nn.Module):
         feats = torch.cat([torch.clamp(near, max=0.3) * 10.0, (radial * 10.0)[:, :, None],
                            torch.log(n)[:, :, None].expand(b, k, 1), canon], dim=2)
         x = self.embed(feats)
+        bias, rbf = self.pair_terms(dist, self.pair, mask)
+        for i, block in enumerate(self.blocks):
+            x = block(x, bias[:, i * self.heads:(i + 1) * self.heads], rbf)
+        return self.norm(x)
+
+    def pair_terms(self, dist: torch.Tensor, pair: nn.Linear, mask: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Attention biases ``(B, heads * layers, K, K)`` and radial bases ``(B, K, K, R)`` of pair distances."""
+        b, k = dist.shape[0], dist.shape[1]
         # Radial basis of every pair distance, laid out (B, R, K*K) so that the per-head biases are
         # one matrix product with no transposes (the pair tensors dominate the run time).
         scaled = dist.reshape(b, 1, k * k) * (1.0 / self.width) - (self.centres / self.width)[None, :, None]
         rbf = torch.exp(-scaled * scaled)  # (B, R, K*K)
-        bias = (self.pair.weight @ rbf + self.pair.bias[None, :, None]).reshape(b, -1, k, k)
+        bias = (pair.weight @ rbf + pair.bias[None, :, None]).reshape(b, -1, k, k)
         rbf = rbf.transpose(1, 2).reshape(b, k, k, -1)
-        bias = bias + (1.0 - mask)[:, None, None, :] * NEG  # no attention to padding
-        for i, block in enumerate(self.blocks):
-            x = block(x, bias[:, i * self.heads:(i + 1) * self.heads], rbf)
-        x = self.norm(x)
-        labels, label_null = self.labels[None], self.label_null.expand(b, -1)
+        if mask is not None:
+            bias = bias + (1.0 - mask)[:, None, None, :] * NEG  # no attention to padding
+        return bias, rbf
+
+    def match(self, x: torch.Tensor, mask: torch.Tensor, labels: torch.Tensor, label_null: torch.Tensor,
+              sinkhorn=log_sinkhorn_dustbin) -> torch.Tensor:
+        """Scores of observations ``x`` ``(B, K, D)`` against ``labels`` ``(1, M, D)`` (costs of staying
+        empty ``label_null`` ``(1, M)``), through the Sinkhorn with dustbins: ``(B, K + 1, M + 1)``."""
+        b = x.shape[0]
+        label_null = label_null.expand(b, -1)
         if len(self.queries):
             padding = ((1.0 - mask) * NEG)[:, None, None, :]
             for q in self.queries:
@@ -140,6 +158,52 @@ class SetLabeler(nn.Module):
             label_null = label_null + self.query_null(labels)[..., 0]
         scores = self.project(x) @ labels.transpose(1, 2) * (1.0 / math.sqrt(x.shape[-1]))
         return sinkhorn(scores, self.obs_null(x)[..., 0], label_null, mask, self.iters)
+
+
+#: Hand length (metres) that turns a descriptor's rest position back into distances.
+DESCRIPTOR_HAND_LENGTH = 0.19
+
+
+class AnyLayoutLabeler(SetLabeler):
+    """``set`` for any layout: each label's vector is computed from where its marker sits on the
+    template hand (:func:`mocap_autolabel.core.layout.marker_descriptors`), not learned per label.
+
+    The descriptors pass a small attention encoder over the layout's own markers (biased by their
+    rest distances), so that a label knows its neighbours in this layout: a fingertip's vector
+    differs where the layout also has the knuckle below it. Trained on random layouts
+    (:mod:`mocap_autolabel.core.synth.layouts`), one per batch.
+
+    Input: as :class:`SetLabeler`, plus ``layout`` float32 ``(M, F)`` descriptors. Output:
+    ``(B, K + 1, M + 1)`` log-probabilities.
+    """
+
+    def __init__(self, descriptor: int, label_layers: int = 2, **kw):
+        super().__init__(1, **kw)
+        del self.labels, self.label_null
+        dim, heads, hidden = self.norm.normalized_shape[0], self.heads, self.blocks[0].ffn[0].out_features
+        rbf = self.centres.shape[0]
+        self.label_embed = nn.Sequential(nn.Linear(descriptor, dim), nn.ReLU(), nn.Linear(dim, dim))
+        self.label_pair = nn.Linear(rbf, heads * label_layers)
+        self.label_blocks = nn.ModuleList(Block(dim, heads, hidden, rbf) for _ in range(label_layers))
+        self.label_norm = nn.LayerNorm(dim)
+        self.label_null_head = nn.Linear(dim, 1)
+
+    def encode_layout(self, layout: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Label vectors ``(1, M, D)`` and costs of staying empty ``(1, M)`` of descriptors ``(M, F)``."""
+        rest = layout[None, :, :3] * DESCRIPTOR_HAND_LENGTH
+        diff = rest[:, :, None, :] - rest[:, None, :, :]
+        dist = torch.sqrt((diff * diff).sum(-1) + 1e-12)
+        bias, rbf = self.pair_terms(dist, self.label_pair, None)
+        y = self.label_embed(layout)[None]
+        for i, block in enumerate(self.label_blocks):
+            y = block(y, bias[:, i * self.heads:(i + 1) * self.heads], rbf)
+        y = self.label_norm(y)
+        return y, self.label_null_head(y)[..., 0]
+
+    def forward(self, points: torch.Tensor, mask: torch.Tensor, axes: torch.Tensor, layout: torch.Tensor,
+                sinkhorn=log_sinkhorn_dustbin) -> torch.Tensor:
+        labels, label_null = self.encode_layout(layout)
+        return self.match(self.encode_points(points, mask, axes), mask, labels, label_null, sinkhorn)
 
 
 class ObservationScores(nn.Module):
@@ -150,8 +214,8 @@ class ObservationScores(nn.Module):
         super().__init__()
         self.net = net
 
-    def forward(self, points: torch.Tensor, mask: torch.Tensor, axes: torch.Tensor) -> torch.Tensor:
-        return self.net(points, mask, axes, sinkhorn=scaling_sinkhorn_dustbin)[:, :-1, :]
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        return self.net(*inputs, sinkhorn=scaling_sinkhorn_dustbin)[:, :-1, :]
 
 
 def sinkhorn_normalise(d: torch.Tensor, iters: int) -> torch.Tensor:

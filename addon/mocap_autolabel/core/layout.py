@@ -214,3 +214,23 @@ def parse_layout(data: dict, source: str = "") -> Layout:
             raise fail(f"{where}: radius_mm = {radius * 1000:g} is not a marker size (0.5 to 20 mm)")
         markers.append(Marker(label, bone, along, float(e.get("across", 0.0)), angle, offset, radius))
     return Layout(str(name), tuple(markers), glove, str(data.get("description", "")), source)
+
+
+#: Length of one marker's descriptor (:func:`marker_descriptors`).
+DESCRIPTOR_SIZE = 3 + 3 + len(BONE_NAMES) + 1
+
+
+def marker_descriptors(layout: Layout) -> np.ndarray:
+    """Where each marker sits on the average template hand: what a layout-conditioned model reads.
+
+    Returns:
+        float32 ``(M, DESCRIPTOR_SIZE)``: rest position in the hand frame divided by the hand
+        length (3), outward skin normal (3), one-hot bone (20), and the fraction along the bone
+        (for palm markers, of the hand length) (1).
+    """
+    hand = HandModel()
+    binding, normals = layout.place(hand)
+    onehot = np.zeros((len(layout), len(BONE_NAMES)))
+    onehot[np.arange(len(layout)), [BONE_INDEX[m.bone] for m in layout.markers]] = 1.0
+    along = np.array([[m.along] for m in layout.markers])
+    return np.concatenate([binding.rest / hand.length, normals, onehot, along], axis=1).astype(np.float32)

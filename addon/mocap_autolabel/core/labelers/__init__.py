@@ -3,7 +3,7 @@
 ========  =========================================================  ===================
 method    what it is                                                 needs
 ========  =========================================================  ===================
-set       ours: attention over the point set + Sinkhorn (ONNX)       a model for the layout
+set       ours: attention over the point set + Sinkhorn (ONNX)       nothing (any layout)
 perm      Ghorbani 2019: PCA slots, residual MLP, Sinkhorn (ONNX)    a model for the layout
 cnn       Han 2018: depth image, VGG-style CNN, matching (ONNX)      a model for the layout
 gmm       Alexanderson 2016: per-marker GMMs in the hand frame        ``fit`` on a labeled take
@@ -44,6 +44,9 @@ class LabelerMethod:
         fits_performer: fitted on a labeled take of the performer (``fit``), else on the layout's
             synthetic range of motion.
         starts_from_frame: tracks from a labeled first frame (``start``).
+        any_layout_model: for ``onnx`` methods, the shipped model that labels any layout (its
+            labels' vectors computed from the layout's geometry), used where no model was trained
+            for the layout itself; None where the method needs a model per layout.
     """
 
     name: ClassVar[str]
@@ -55,6 +58,7 @@ class LabelerMethod:
     relabels_locally: ClassVar[bool] = True
     fits_performer: ClassVar[bool] = False
     starts_from_frame: ClassVar[bool] = False
+    any_layout_model: ClassVar[str | None] = None
 
     @classmethod
     def make(cls, layout: Layout, model: str | os.PathLike | None = None, cache=None, **options) -> Labeler:
@@ -85,9 +89,12 @@ class _OnnxMethod(LabelerMethod):
         from .onnx_labeler import shipped_model
 
         path = os.fspath(model) if model is not None else shipped_model(cls.name, layout.name)
+        if model is None and not os.path.isfile(path) and cls.any_layout_model:
+            path = shipped_model(cls.name, cls.any_layout_model)
         if model is None and not os.path.isfile(path):
-            raise MocapInputError(path, f"no shipped '{cls.name}' model for layout '{layout.name}'; "
-                                        f"train one with: python -m mocap_autolabel train --layout ... -o model.onnx")
+            raise MocapInputError(path, f"'{cls.name}' needs a model trained for each layout, and none ships for "
+                                        f"'{layout.name}': label it with --method set (any layout), or train one "
+                                        f"with: python -m mocap_autolabel train --layout ... -o model.onnx")
         labeler = _loaded_onnx(path, layout, cache)
         if labeler.name != cls.name:
             raise MocapInputError(path, f"model is a '{labeler.name}' model, not '{cls.name}'")
@@ -97,6 +104,7 @@ class _OnnxMethod(LabelerMethod):
 class SetMethod(_OnnxMethod):
     name = "set"
     strided = True
+    any_layout_model = "any"
     low_probability = False  # a han19 take labeled with glove13 has calibrated confidences of 0.5 on wrong labels
 
 
@@ -189,7 +197,7 @@ def _loaded_onnx(path: str, layout: Layout, cache=None) -> Labeler:
         st = os.stat(path)
     except OSError:
         return OnnxLabeler(path, layout)  # reports the missing file
-    key = (os.path.abspath(path), st.st_mtime_ns, st.st_size, layout.name, tuple(layout.names))
+    key = (os.path.abspath(path), st.st_mtime_ns, st.st_size, layout.name, layout.markers, layout.glove)
     return cache.remember("onnx", key, lambda: OnnxLabeler(path, layout))
 
 

@@ -15,7 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..errors import MocapInputError
-from ..layout import Layout
+from ..layout import Layout, marker_descriptors
 from .base import Labeler
 from .inputs import prepare_inputs, scores_from_outputs
 
@@ -59,9 +59,13 @@ MIN_WIDTH = 16
 class OnnxLabeler(Labeler):
     """Scores from an ONNX model, run in batches with onnxruntime.
 
+    A model whose card says ``input.layout_conditioned`` labels any layout: it is fed the layout's
+    :func:`..layout.marker_descriptors` and needs ``layout``.
+
     Args:
         model_path: the ``.onnx`` file; its card ``.json`` must lie beside it.
-        layout: if given, the model must have been trained for exactly these label names.
+        layout: if given, the model must have been trained for exactly these label names (or be
+            layout-conditioned).
         batch: frames per inference call (bounded memory; a few hundred keeps tensors in cache).
     """
 
@@ -72,6 +76,13 @@ class OnnxLabeler(Labeler):
         self.card = load_card(self.path)
         self.name = self.card["method"]
         names = list(self.card["layout"].get("labels", []))
+        self.extra_feeds: dict[str, np.ndarray] = {}
+        if self.card["input"].get("layout_conditioned"):
+            if layout is None:
+                raise MocapInputError(self.path, "this model labels any layout: name the layout to label")
+            names = layout.names
+            self.card = {**self.card, "layout": {"name": layout.name, "labels": names}}
+            self.extra_feeds["layout"] = marker_descriptors(layout)
         if layout is not None and names != layout.names:
             raise MocapInputError(self.path, f"model is for layout '{self.card['layout'].get('name')}' "
                                              f"({len(names)} labels), not for '{layout.name}' ({len(layout)} labels)")
@@ -115,6 +126,7 @@ class OnnxLabeler(Labeler):
             pts[:, :cols.shape[1]] = np.take_along_axis(points[rows], cols[..., None], axis=1)
             msk[:, :cols.shape[1]] = np.take_along_axis(mask[rows], cols, axis=1)
             feeds, context = prepare_inputs(self.card, pts, msk)
+            feeds.update(self.extra_feeds)
             outputs = self.session.run(None, feeds)  # releases the GIL
             scores = scores_from_outputs(self.card, outputs, context, pts, msk)
             out[rows[:, None], cols] = scores[:, :cols.shape[1]]
