@@ -24,7 +24,7 @@ import torch
 from mocap_autolabel.core.atomic import atomic_output
 from mocap_autolabel.core.labelers.assign import assign
 from mocap_autolabel.core.labelers.inputs import prepare_inputs
-from mocap_autolabel.core.layout import DESCRIPTOR_SIZE, Layout, marker_descriptors
+from mocap_autolabel.core.layout import DESCRIPTOR_SIZE, Layout, builtin_layouts, load_layout, marker_descriptors
 from mocap_autolabel.core.metrics import score_labeling
 from mocap_autolabel.core.synth.frames import FrameConfig, LabeledFrames, sample_frames
 from mocap_autolabel.core.synth.layouts import HELD_OUT, random_layout
@@ -34,31 +34,54 @@ from .train import NULL_OFFSETS, _batches, _progress, calibration, write_card
 
 #: Steps between checkpoints.
 CHECKPOINT_STEPS = 100
+#: Share of training layouts that are parts of the built-in ones (:func:`training_layout`).
+BUILTIN_SHARE = 0.3
 
 
 @dataclass
 class AnyRecipe:
     """Everything that determines the ``set_any`` model (with the code)."""
 
-    steps: int = 24000
+    steps: int = 30000
     batch: int = 192
     lr: float = 3e-3
     weight_decay: float = 1e-4
     seed: int = 0
     chunk: int = 1152  # frames of one random layout (6 batches)
     frames: dict = field(default_factory=lambda: asdict(FrameConfig(
-        hands=12, convergence=0.1, proportions=0.1, range_margin_deg=15.0, placement_sd=0.003, tip_convergence=0.018)))
-    model: dict = field(default_factory=lambda: {"dim": 64, "hidden": 128, "layers": 4, "queries": 2, "label_layers": 2})
+        hands=12, distractor_share=0.3, convergence=0.1, proportions=0.1, range_margin_deg=15.0, placement_sd=0.003,
+        tip_convergence=0.018)))
+    model: dict = field(default_factory=lambda: {"dim": 64, "hidden": 128, "layers": 4, "queries": 2,
+                                                 "label_layers": 2})
     validation_layouts: int = 48
     validation_frames: int = 128  # per validation layout
-    compile: bool = True
+    compile: bool = False  # label sets of every size recompile the graph again and again
 
 
 def frame_config(recipe: AnyRecipe, layout: Layout) -> FrameConfig:
-    """The recipe's corruption for ``layout``: at most a quarter of its markers dropped per frame."""
+    """The recipe's corruption scaled to ``layout``: at most a quarter of its markers dropped, and ghosts
+    and distractors in proportion to its size (eight distractors around five fingertips drown them)."""
     cfg = dict(recipe.frames)
-    cfg["drop"] = (0, min(cfg["drop"][1], max(1, len(layout) // 4)))
+    m = len(layout)
+    cfg["drop"] = (0, min(cfg["drop"][1], max(1, m // 4)))
+    cfg["ghosts"] = (0, min(cfg["ghosts"][1], max(1, m // 5)))
+    cfg["distractors"] = (1, min(cfg["distractors"][1], max(2, m // 3)))
     return FrameConfig(**cfg)
+
+
+def training_layout(rng: np.random.Generator) -> Layout:
+    """A random layout (:func:`random_layout`), or now and then a random part of a built-in one
+    without its markers in the held-out band, so that the sets studios use are seen often."""
+    if rng.random() >= BUILTIN_SHARE:
+        return random_layout(rng)
+    lo, hi = HELD_OUT["proximal_phalanx_along"]
+    while True:
+        markers = [m for m in load_layout(str(rng.choice(builtin_layouts()))).markers
+                   if not (m.bone.endswith("_prox") and lo <= m.along < hi)]
+        if len(markers) >= 3:
+            break
+    keep = rng.permutation(len(markers))[:int(rng.integers(3, len(markers) + 1))]
+    return Layout("builtin part", tuple(markers[i] for i in keep))
 
 
 def descriptors(layout: Layout) -> torch.Tensor:
@@ -166,8 +189,9 @@ def train_any(recipe: AnyRecipe, checkpoint: str | None = None,
     ema = None
     for step in range(start, recipe.steps):
         if not batches:
-            layout = random_layout(rng)
-            batches = _batches(sample_frames(layout, recipe.chunk, rng, frame_config(recipe, layout)), recipe.batch, rng)
+            layout = training_layout(rng)
+            pool = sample_frames(layout, recipe.chunk, rng, frame_config(recipe, layout))
+            batches = _batches(pool, recipe.batch, rng)
         batch = batches.pop()
         k = max(1, int(batch.mask.sum(axis=1).max()))
         batch = LabeledFrames(batch.points[:, :k], batch.labels[:, :k], batch.mask[:, :k], batch.markers)

@@ -132,7 +132,8 @@ class SetLabeler(nn.Module):
             x = block(x, bias[:, i * self.heads:(i + 1) * self.heads], rbf)
         return self.norm(x)
 
-    def pair_terms(self, dist: torch.Tensor, pair: nn.Linear, mask: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+    def pair_terms(self, dist: torch.Tensor, pair: nn.Linear,
+                   mask: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
         """Attention biases ``(B, heads * layers, K, K)`` and radial bases ``(B, K, K, R)`` of pair distances."""
         b, k = dist.shape[0], dist.shape[1]
         # Radial basis of every pair distance, laid out (B, R, K*K) so that the per-head biases are

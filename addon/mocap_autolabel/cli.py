@@ -34,6 +34,7 @@ if __package__:  # else run as a script (Blender's -P, or re-run by multiprocess
     from .commands.import_scene import _import
     from .commands.info import _info
     from .commands.label import _label
+    from .commands.layout import _layout
     from .commands.progress import _ProgressBar  # noqa: F401 (re-exported)
     from .commands.solve import _solve
     from .commands.synth import _synth
@@ -204,6 +205,20 @@ def build_parser() -> argparse.ArgumentParser:
     shown.add_argument("--quiet", action="store_true", help="no progress, only the summary and errors")
     shown.add_argument("--json-progress", action="store_true", help="progress as JSON lines on stderr (farm logs)")
 
+    lay = sub.add_parser("layout", help="fit a layout TOML from a labeled take: each marker's bone and place on the "
+                                        "template hand (no TOML to write, no training)")
+    lay.add_argument("--from", dest="source", required=True, metavar="LABELED",
+                     help="a labeled take (C3D, TRC, TSV) of one hand, or of two with --side")
+    lay.add_argument("-o", "--output", required=True, metavar="OUT.toml", help="the layout file")
+    lay.add_argument("--name", help="the layout's name (default: the file's name)")
+    lay.add_argument("--side", choices=("left", "right"),
+                     help="fit this hand's points (named by --hand-names; their side token is taken off)")
+    lay.add_argument("--hand-names", metavar="CONVENTION", help="how names carry the side (default prefix: L_ThumbTip)")
+    lay.add_argument("--points", metavar="PATTERN,...",
+                     help="only the points whose names match (* and ? wildcards), e.g. to leave body markers out")
+    lay.add_argument("--frames", type=int, default=40, help="frames the hand is calibrated on (default 40)")
+    _progress_flags(lay)
+
     trn = sub.add_parser("train", help="train a 'set' model for a marker layout from synthetic data (needs PyTorch)")
     trn.add_argument("--layout", required=True, help="built-in layout name or a layout .toml")
     trn.add_argument("-o", "--output", required=True, metavar="OUT.onnx", help="the model; its card goes beside it")
@@ -266,6 +281,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "synth" and not (1 <= args.frames <= 10_000_000 and 1 <= args.rate <= 10_000):
         print("mocap_autolabel synth: error: --frames must be 1 to 10,000,000 and --rate 1 to 10,000", file=sys.stderr)
         return EXIT_USAGE
+    if args.command == "layout" and not args.output.lower().endswith(".toml"):
+        print(f"mocap_autolabel layout: error: -o must name a .toml file, got {args.output!r}", file=sys.stderr)
+        return EXIT_USAGE
     if args.command == "train" and not args.output.lower().endswith(".onnx"):
         print(f"mocap_autolabel train: error: -o must name a .onnx file, got {args.output!r}", file=sys.stderr)
         return EXIT_USAGE
@@ -277,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mocap_autolabel fill: error: -o must name a .c3d file, got {args.output!r}", file=sys.stderr)
         return EXIT_USAGE
     command = {"info": _info, "import": _import, "synth": _synth, "label": _label, "solve": _solve,
-               "fill": _fill, "batch": _batch, "train": _train}[args.command]
+               "fill": _fill, "batch": _batch, "train": _train, "layout": _layout}[args.command]
     return command(args)
 
 

@@ -38,13 +38,35 @@ HANDS_ITEMS = [("auto", "Find Them", "Find how many hands the take holds (a take
                ("2", "Two", "Label two hands (left and right), named L_ / R_")]
 
 
+#: A scene stores a layout choice as its item's number: the first five layouts keep the numbers their
+#: places in the list gave them before more layouts shipped, later ones a number from their name.
+_LAYOUT_NUMBERS = {"glove13": 0, "han19": 1, "tips10": 2, "tips3": 3, "tips5": 4}
+
+
+def layout_number(name: str) -> int:
+    """The stable enum number of a built-in layout (see :data:`_LAYOUT_NUMBERS`)."""
+    import zlib
+
+    return _LAYOUT_NUMBERS.get(name, 1000 + zlib.crc32(name.encode()) % 1_000_000)
+
+
+_LAYOUT_ITEMS: list[tuple] = []  # Blender needs the callback's strings kept alive: built once
+
+
 def _layouts(_self, _context):
-    return [(name, name, f"Built-in layout {name}") for name in builtin_layouts()]
+    from ..core.layout import load_layout
+
+    if not _LAYOUT_ITEMS:
+        for name in builtin_layouts():
+            layout = load_layout(name)
+            _LAYOUT_ITEMS.append((name, name, f"{layout.description} ({len(layout)} markers)", "NONE",
+                                  layout_number(name)))
+    return _LAYOUT_ITEMS
 
 
-#: The layout enums' default: the command line's (han19), not the first by name. A dynamic enum
-#: takes its default as the item's number, which is its place in the list.
-LAYOUT_DEFAULT = builtin_layouts().index(DEFAULT_LAYOUT)
+#: The layout enums' default: the command line's (han19), not the first by name (a dynamic enum
+#: takes its default as the item's number).
+LAYOUT_DEFAULT = layout_number(DEFAULT_LAYOUT)
 
 
 def _methods(_self, _context):

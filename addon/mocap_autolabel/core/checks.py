@@ -72,14 +72,18 @@ class HandCheck:
 def _believed(labeling: Labeling, m: int) -> np.ndarray:
     """bool ``(F, M)``: where each label sits on a segment whose mean probability (calibrated
     confidence for methods whose probabilities are low where right,
-    :attr:`.labelers.LabelerMethod.low_probability`) reaches :data:`BELIEVED`."""
+    :attr:`.labelers.LabelerMethod.low_probability`) reaches :data:`BELIEVED`; every label of a
+    method whose probabilities say nothing of that (:attr:`~.labelers.LabelerMethod.sure_of_itself`)."""
     seg = labeling.segment_ids()  # (F, P)
     frame, slot = np.nonzero(seg >= 0)
     s = seg[frame, slot]
-    method = labeling.info.get("method")
-    low = method is not None and labeler_method(method).low_probability
+    name = labeling.info.get("method")
+    method = labeler_method(name) if name is not None else None
+    low = method is not None and method.low_probability
     belief = labeling.confidence if low else labeling.evidence[:, 0]
-    keep = (labeling.label[s] >= 0) & (belief[s] >= BELIEVED)
+    keep = labeling.label[s] >= 0
+    if method is None or method.sure_of_itself:
+        keep &= belief[s] >= BELIEVED
     out = np.zeros((labeling.n_frames, m), dtype=bool)
     out[frame[keep], labeling.label[s[keep]]] = True
     return out

@@ -64,6 +64,9 @@ def label_take(take: Take, layout: Layout, settings: LabelSettings = DEFAULT_SET
     """
     method = labeler_method(settings.method)
     mode = temporal_mode(settings.temporal)
+    refusal = method.refusal(layout, labeler=labeler is not None, fit=fit is not None, start=start is not None)
+    if refusal:
+        raise MocapInputError(layout.source or layout.name, refusal)
     if take.n_frames == 0 or take.n_points == 0 or not take.valid.any():
         raise MocapInputError(take.source, "the take has no marker samples to label")
     for c in corrections.constraints:

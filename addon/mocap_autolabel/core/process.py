@@ -134,6 +134,11 @@ def choose_layout(take: Take, requested: str | None) -> str:
     return requested or layout_from_names(take) or DEFAULT_LAYOUT
 
 
+#: A built-in layout is tried against a take only if it has at most this many times the points of the
+#: take's median frame (plus two).
+FEWER_POINTS = 1.5
+
+
 def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: float = 0.95,
                  cache: RunCache | None = None) -> LayoutDoubt | None:
     """A :class:`.checks.LayoutDoubt` when another built-in layout fits ``take`` clearly better, else None.
@@ -149,8 +154,12 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
     excerpt = replace(take, positions=take.positions[:CHECK_FRAMES],
                       residuals=None if take.residuals is None else take.residuals[:CHECK_FRAMES], filled=None)
     shares = {}
+    # A layout with far more markers than the take shows points is not the take's (and labeling
+    # with it sets the vote a large, slow problem): a sparse set's take is not tried as han19.
+    most = FEWER_POINTS * float(np.median(excerpt.valid.sum(axis=1))) + 2
     for name in builtin_layouts():
-        if name != layout.name and os.path.isfile(shipped_model("set", name)):
+        if (name != layout.name and os.path.isfile(shipped_model("set", name))
+                and len(load_layout(name)) <= most):
             try:
                 other = label_take(excerpt, load_layout(name), cache=cache)
             except MocapInputError:  # e.g. no samples in the excerpt

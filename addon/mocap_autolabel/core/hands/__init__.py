@@ -52,10 +52,13 @@ from .sides import (
     TRADE_DISTANCE,
     TRADE_NATS,
     SideEvidence,
+    body_side,
+    body_side_evidence,
     chiral_tetrahedron,
     decide_sides,
     handedness,
     identity_swaps,
+    shape_tells_sides,
     side_evidence,
     swap_frames,
     swap_ranges,
@@ -78,6 +81,9 @@ from .tracking import (
 )
 
 __all__ = [
+    "body_side",
+    "body_side_evidence",
+    "shape_tells_sides",
     "AMBIGUOUS",
     "APART",
     "CROWDED",

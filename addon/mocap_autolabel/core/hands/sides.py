@@ -76,6 +76,60 @@ def chiral_tetrahedron(layout: Layout, poses: int = 96,
     return (q if sign[best] > 0 else (q[1], q[0], q[2], q[3])), float(agree[best])
 
 
+#: A layout tells a left hand from a right one by its shape only where its most chiral tetrahedron
+#: keeps its turn in at least this share of poses (fingertips alone flatten out as fingers spread).
+CHIRAL_AGREE = 0.9
+
+
+def shape_tells_sides(layout: Layout) -> bool:
+    """Whether ``layout``'s markers tell a left hand from a right one by their shape alone."""
+    chiral = chiral_tetrahedron(layout)
+    return chiral is not None and chiral[1] >= CHIRAL_AGREE
+
+
+def body_side(name: str) -> str | None:
+    """The side a labeled body point's name gives (``LWRA``, ``L_Elbow``, ``LeftShoulder``,
+    ``right_elbow``, ``Sub:RFIN``), or None."""
+    import re
+
+    base = name.rsplit(":", 1)[-1]
+    word = re.match(r"(?i)(left|right)", base)
+    if word:
+        return word.group(1).lower()
+    letter = re.match(r"([LR])(?=[A-Z0-9_])", base)
+    return {"L": "left", "R": "right"}[letter.group(1)] if letter else None
+
+
+#: Metres: a hand's nearest side-named body point counts only within this reach (forearm, wrist).
+BODY_REACH = 0.35
+
+
+def body_side_evidence(body: np.ndarray, sides: Sequence[str | None], centres: np.ndarray) -> list[SideEvidence | None]:
+    """Sides from a labeled body: in each frame, each hand votes for the side of its nearest
+    side-named body point within :data:`BODY_REACH`.
+
+    Args:
+        body: ``(F, B, 3)`` the labeled body points (metres, NaN where missing).
+        sides: ``(B,)`` the side each one's name gives (:func:`body_side`), or None.
+        centres: ``(F, H, 3)`` each hand's centre per frame (NaN where unseen).
+    """
+    named = np.array([s is not None for s in sides], dtype=bool)
+    if not named.any():
+        return [None] * centres.shape[1]
+    pts = body[:, named]
+    left = np.array([s == "left" for s in sides if s is not None])
+    out = []
+    for h in range(centres.shape[1]):
+        with np.errstate(invalid="ignore"):
+            d = np.linalg.norm(pts - centres[:, h, None], axis=2)
+        d = np.where(np.isfinite(d), d, np.inf)
+        near = d.argmin(axis=1)
+        ok = d[np.arange(len(d)), near] <= BODY_REACH
+        votes = np.where(left[near], -1, 1)[ok]
+        out.append(SideEvidence.of(votes.astype(np.int8)))
+    return out
+
+
 def handedness(observed: np.ndarray, layout: Layout) -> np.ndarray | None:
     """int8 ``(F,)``: the handedness of ``observed (F, M, 3)`` labeled markers (metres, NaN where
     missing) in each frame, the sign of :func:`chiral_tetrahedron`'s volume (+1 as on a right

@@ -39,6 +39,9 @@ class LabelerMethod:
             score every frame, as their papers do.
         low_probability: its per-frame probabilities are low even where right: its segments are
             believed by calibrated confidence (the no-hand rule).
+        sure_of_itself: its probabilities (or calibrated confidences) tell a hand from a body or a
+            prop, so the no-hand rule counts only labels it believes; False (``gmm``, ``nearest``):
+            the rule asks only whether its labels form a hand, so that it never silences them.
         whole_take: labels a take from its first frame on (no windows, no local re-solve).
         relabels_locally: a reviewer's re-solve may label only the frames around a change.
         fits_performer: fitted on a labeled take of the performer (``fit``), else on the layout's
@@ -54,11 +57,18 @@ class LabelerMethod:
     labels_two_hands: ClassVar[bool] = False
     strided: ClassVar[bool] = False
     low_probability: ClassVar[bool] = False
+    sure_of_itself: ClassVar[bool] = True
     whole_take: ClassVar[bool] = False
     relabels_locally: ClassVar[bool] = True
     fits_performer: ClassVar[bool] = False
     starts_from_frame: ClassVar[bool] = False
     any_layout_model: ClassVar[str | None] = None
+
+    @classmethod
+    def refusal(cls, layout: Layout, *, labeler: bool = False, fit: bool = False, start: bool = False) -> str | None:
+        """Why this method cannot label ``layout`` given what the caller brings (a ready ``labeler``,
+        a labeled ``fit`` take, a labeled ``start`` frame), in one line; None where it can."""
+        return None
 
     @classmethod
     def make(cls, layout: Layout, model: str | os.PathLike | None = None, cache=None, **options) -> Labeler:
@@ -120,6 +130,18 @@ class GmmMethod(LabelerMethod):
     name = "gmm"
     relabels_locally = False
     fits_performer = True
+    sure_of_itself = False
+    #: Markers on the back of the hand or wrist (bone ``palm``) its hand frame is built from.
+    HAND_MARKERS = 3
+
+    @classmethod
+    def refusal(cls, layout: Layout, *, labeler: bool = False, fit: bool = False, start: bool = False) -> str | None:
+        hand = sum(m.bone == "palm" for m in layout.markers)
+        if labeler or hand >= cls.HAND_MARKERS:
+            return None
+        return (f"gmm (Alexanderson 2016) builds its hand frame from {cls.HAND_MARKERS} markers on the back of the "
+                f"hand or wrist (bone \"palm\"), and layout '{layout.name}' has {hand}: label it with --method set, "
+                "which needs none")
 
     @classmethod
     def make(cls, layout: Layout, model: str | os.PathLike | None = None, cache=None, **options) -> Labeler:
@@ -148,6 +170,7 @@ class GmmMethod(LabelerMethod):
 class NearestMethod(LabelerMethod):
     name = "nearest"
     whole_take = True
+    sure_of_itself = False
     relabels_locally = False
     starts_from_frame = True
 

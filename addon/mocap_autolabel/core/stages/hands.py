@@ -17,9 +17,12 @@ from ..hands import (
     HandNaming,
     Hands,
     SideEvidence,
+    body_side,
+    body_side_evidence,
     decide_sides,
     find_hands,
     handedness,
+    shape_tells_sides,
     sided_layout_names,
     swap_frames,
     swap_ranges,
@@ -191,6 +194,24 @@ def labeled_handedness(take: Take, layout: Layout, labeling: Labeling, hands: in
     return right
 
 
+def body_evidence(take: Take, layout: Layout, labeling: Labeling, hands: int) -> list[SideEvidence | None]:
+    """Sides of each hand from the take's side-named body points (:func:`..hands.sides.body_side_evidence`)."""
+    named = other_named_points(take, layout)
+    if named is None:
+        return [None] * hands
+    cols = np.flatnonzero(named)
+    m = len(layout)
+    per = labeling.per_sample()
+    centres = np.full((take.n_frames, hands, 3), np.nan)
+    for h in range(hands):
+        mine = (per >= h * m) & (per < (h + 1) * m)
+        count = mine.sum(axis=1)
+        total = np.where(mine[..., None], np.nan_to_num(take.positions), 0.0).sum(axis=1)
+        seen = count > 0
+        centres[seen, h] = total[seen] / count[seen, None]
+    return body_side_evidence(take.positions[:, cols], [body_side(take.names[c]) for c in cols], centres)
+
+
 def name_sides_stage(run: LabelRun) -> None:
     """Decide the sides of the hands, put the left hand's labels first and name them; facts in
     ``info["hands"]`` (with the frames where the hands found traded places)."""
@@ -205,8 +226,16 @@ def name_sides_stage(run: LabelRun) -> None:
         labeling.info["hands"] = facts
         run.timed("sides", t0)
         return
-    right = labeled_handedness(take, layout, labeling, found.count)
-    evidence = [SideEvidence.of(r) for r in right.T]
+    if shape_tells_sides(layout):
+        evidence = [SideEvidence.of(r) for r in labeled_handedness(take, layout, labeling, found.count).T]
+    else:
+        evidence = body_evidence(take, layout, labeling, found.count)
+        facts["sides_by"] = "body names" if any(e is not None for e in evidence) else "none"
+        if sides is None and found.count == 2:
+            facts["warning"] = "; ".join(filter(None, [facts.get("warning"), (
+                f"layout '{layout.name}' has too few markers off one plane to tell a left hand from a right one "
+                "by shape; " + ("sides taken from the labeled body's L/R names" if facts["sides_by"] == "body names"
+                                else "no side-named body points either: check the sides (--sides)"))]))
     side_list, side_facts = decide_sides(evidence, None if sides is None else list(sides))
     if swaps is not None and swaps.any():
         facts["swaps"] = swap_ranges(swaps)

@@ -38,7 +38,9 @@ def _along(rng: np.random.Generator, low: float, high: float, bone: str) -> floa
 
 def _angle(rng: np.random.Generator) -> float:
     """Degrees about the bone from its back: mostly dorsal, now and then on a side."""
-    return float(np.clip(rng.normal(0.0, 20.0), -60.0, 60.0)) if rng.random() < 0.92 else float(rng.choice([-90.0, 90.0]))
+    if rng.random() < 0.92:
+        return float(np.clip(rng.normal(0.0, 20.0), -60.0, 60.0))
+    return float(rng.choice([-90.0, 90.0]))
 
 
 def _candidates(rng: np.random.Generator) -> list[Marker]:
@@ -61,7 +63,8 @@ def _candidates(rng: np.random.Generator) -> list[Marker]:
         for bone, p in bones:
             if rng.random() < p:
                 low = 0.6 if bone.endswith("_meta") and digit != "thumb" else 0.1  # finger metacarpals: the knuckles
-                others.append(Marker(f"{bone}_{len(others)}", bone, _along(rng, low, 0.95, bone), angle_deg=_angle(rng)))
+                along = _along(rng, low, 0.95, bone)
+                others.append(Marker(f"{bone}_{len(others)}", bone, along, angle_deg=_angle(rng)))
         if rng.random() < 0.05:  # now and then a second marker on the distal phalanx
             others.append(Marker(f"{dist}_{len(others)}", dist, _along(rng, 0.1, 0.4, dist), angle_deg=_angle(rng)))
     if rng.random() < 0.65:  # markers on the back of the hand or at the wrist

@@ -1,0 +1,127 @@
+"""Any marker set without training: marker descriptors, random training layouts, the built-in studio
+sets, the shipped layout-conditioned model, one-line refusals, a layout fitted from a labeled take,
+and sides where a layout's shape cannot tell them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mocap_autolabel.cli import main
+from mocap_autolabel.core.errors import MocapInputError
+from mocap_autolabel.core.hand.skeleton import BONE_NAMES, HandModel
+from mocap_autolabel.core.hands import body_side, shape_tells_sides
+from mocap_autolabel.core.layout import (
+    DESCRIPTOR_SIZE,
+    Layout,
+    builtin_layouts,
+    load_layout,
+    marker_descriptors,
+    parse_layout,
+)
+from mocap_autolabel.core.layout_fit import fit_layout, hand_points, layout_toml, scan_layout
+from mocap_autolabel.core.metrics import score_labeling
+from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.settings import LabelSettings
+from mocap_autolabel.core.synth.generate import save_synth, synthesize
+from mocap_autolabel.core.synth.layouts import HELD_OUT, MIN_SPACING, SIZES, random_layout
+from mocap_autolabel.core.take import Take
+
+STUDIO_SETS = ("tips5", "tips3", "tips10", "tips5_mid", "tips5_hand3", "tips3_hand3", "tips2_hand3", "tips10_hand3",
+               "optitrack_tips5", "vicon_pig_tips5")
+
+
+def test_descriptors_say_where_each_marker_sits_whatever_the_order():
+    layout = load_layout("tips5_hand3")
+    d = marker_descriptors(layout)
+    assert d.shape == (len(layout), DESCRIPTOR_SIZE) and d.dtype == np.float32
+    bones = [BONE_NAMES[i] for i in d[:, 6:6 + len(BONE_NAMES)].argmax(axis=1)]
+    assert bones == [m.bone for m in layout.markers]
+    # a fingertip lies further from the wrist than the back of the hand (rest position / hand length)
+    assert d[layout.names.index("MiddleTip"), 1] > 0.8 > 0.3 > d[layout.names.index("HandTop"), 1]
+    reordered = Layout("r", tuple(reversed(layout.markers)))
+    assert np.array_equal(marker_descriptors(reordered), d[::-1])
+
+
+def test_random_layouts_keep_their_sizes_spacing_and_the_held_out_band():
+    rng = np.random.default_rng(3)
+    hand = HandModel()
+    lo, hi = HELD_OUT["proximal_phalanx_along"]
+    sizes, with_hand = [], 0
+    for _ in range(60):
+        layout = random_layout(rng)
+        sizes.append(len(layout))
+        with_hand += any(m.bone == "palm" for m in layout.markers)
+        rest = layout.place(hand)[0].rest
+        d = np.linalg.norm(rest[:, None] - rest[None], axis=2) + np.eye(len(layout))
+        assert d.min() >= MIN_SPACING
+        assert not any(m.bone.endswith("_prox") and lo <= m.along < hi for m in layout.markers)
+    assert SIZES[0] <= min(sizes) and max(sizes) <= SIZES[1] and max(sizes) > 12
+    assert 0 < with_hand < 60  # with and without hand markers
+
+
+@pytest.mark.parametrize("name", STUDIO_SETS)
+def test_the_studio_sets_are_built_in_and_cite_where_their_positions_come_from(name):
+    from importlib import resources
+
+    assert name in builtin_layouts()
+    layout = load_layout(name)
+    assert 2 <= len({m.bone for m in layout.markers if m.bone.endswith("_dist")}) <= 5  # fingertips
+    text = (resources.files("mocap_autolabel.core") / "layouts" / f"{name}.toml").read_text()
+    comments = " ".join(line for line in text.splitlines() if line.startswith("#"))
+    assert any(src in comments for src in ("HAND.md", "METHODS.md", "optitrack", "Plug-in Gait", "Hoyet")), comments
+
+
+def test_the_layout_toml_written_for_a_fitted_layout_reads_back_the_same():
+    layout = load_layout("vicon_pig_tips5")
+    again = parse_layout(__import__("tomllib").loads(layout_toml(layout)), "written")
+    hand = HandModel(length=0.2, breadth=0.09, side="left")
+    assert np.allclose(again.place(hand)[0].rest, layout.place(hand)[0].rest)
+    assert again.names == layout.names
+
+
+def test_gmm_says_in_one_line_why_a_layout_without_hand_markers_cannot_be_labeled(tmp_path, capsys):
+    take = tmp_path / "tips5.c3d"
+    save_synth(synthesize(load_layout("tips5"), 120, seed=1), str(take))
+    assert main(["label", str(take), "--layout", "tips5", "--method", "gmm", "-o", str(tmp_path / "o.c3d")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "three" not in err and "3 markers on the back of the hand" in err
+    assert "--method set" in err and not (tmp_path / "o.c3d").exists()
+    assert main(["label", str(take), "--layout", "tips5", "--method", "perm", "-o", str(tmp_path / "o.c3d")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "needs a model trained for each layout" in err and "--method set" in err
+
+
+def test_the_no_hand_rule_does_not_silence_gmm_on_a_take_it_labels():
+    from mocap_autolabel.core.checks import check_hand
+    from mocap_autolabel.core.labelers.gmm import GmmLabeler
+
+    layout = load_layout("tips5_hand3")
+    synth = synthesize(layout, 600, seed=4)
+    labeler = GmmLabeler(layout).fit(synth.markers[:300])  # the performer's labeled range of motion
+    labeling = label_take(synth.take, layout, LabelSettings(method="gmm"), labeler=labeler)
+    right = score_labeling(labeling.per_sample(), synth.labels, synth.take.valid, len(layout)).as_dict()
+    assert right["accuracy"] > 0.5  # it labels the hand, if not as well as ours
+    assert check_hand(synth.take, layout, labeling).found
+
+
+def test_body_names_give_sides_and_fingertips_cannot_tell_them_by_shape():
+    assert [body_side(n) for n in ("LWRA", "Sub:RFIN", "L_Elbow", "right_elbow", "LeftShoulder", "Lamp", "hand_top")] \
+        == ["left", "right", "left", "right", "left", None, None]
+    assert shape_tells_sides(load_layout("han19"))
+    assert not shape_tells_sides(load_layout("tips3"))  # three markers have no turn at all
+
+
+def test_one_hand_of_a_labeled_take_by_its_side_names():
+    pos = np.random.default_rng(0).normal(size=(5, 4, 3))
+    take = Take(positions=pos, names=["L_ThumbTip", "L_IndexTip", "R_ThumbTip", "*3"], rate=100.0, source="x.c3d")
+    observed, names = hand_points(take, side="left")
+    assert names == ["ThumbTip", "IndexTip"] and np.array_equal(observed, pos[:, :2])
+    assert hand_points(take, points=["R_*"])[1] == ["R_ThumbTip"]
+    with pytest.raises(MocapInputError, match="no labeled point of the right hand matches Index"):
+        hand_points(take, side="right", points=["Index*"])
+
+
+def test_a_layout_is_fitted_from_few_to_many_markers_only():
+    with pytest.raises(MocapInputError, match="from 3 to 25 labeled markers"):
+        fit_layout(np.zeros((20, 2, 3)), ["a", "b"])
+    assert len(scan_layout()) == 25
