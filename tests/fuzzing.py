@@ -437,7 +437,9 @@ def check_take(take) -> str:
         return f"bad positions {p.dtype} {p.shape} for {len(take.names)} names"
     if np.isinf(p).any():
         return "infinite coordinates"
-    if not (np.isfinite(take.rate) and take.rate > 0):
+    from mocap_autolabel.core.take import MAX_RATE, MIN_RATE
+
+    if not (np.isfinite(take.rate) and MIN_RATE <= take.rate < MAX_RATE):  # 1e-320 Hz: a C3D of rate 0
         return f"bad rate {take.rate}"
     if any("\n" in w for w in take.warnings):
         return "a warning of several lines"

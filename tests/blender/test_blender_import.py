@@ -92,6 +92,32 @@ def test_bad_file_reports_error_without_crash(empty_scene, bpy_module, tmp_path)
     assert len(bpy_module.data.collections) == 0
 
 
+@pytest.mark.parametrize("scale", [0.0, -1.0])
+def test_a_scale_of_zero_or_below_is_refused_and_imports_nothing(empty_scene, bpy_module, tmp_path, scale):
+    """Blender clamped Scale 0 or -1 to 1e-6 and the import reported success."""
+    path = tmp_path / "take.c3d"
+    write_c3d(small_take(frames=20, points=3), path)
+    with pytest.raises(RuntimeError) as info:  # the operator's ERROR report, as bpy.ops shows it to a script
+        bpy_module.ops.mocap_autolabel.import_markers(filepath=str(path), scale=scale)
+    assert str(info.value).strip().splitlines()[-1] == f"Error: Scale must be above 0 (got {scale:g}); nothing imported"
+    assert len(bpy_module.data.collections) == 0 and len(bpy_module.data.objects) == 0
+    assert bpy_module.ops.mocap_autolabel.import_markers(filepath=str(path), scale=0.001) == {"FINISHED"}
+
+
+@pytest.mark.parametrize("name, text", [
+    ("empty.trc", "PathFileType\t4\t(X/Y/Z)\tempty.trc\nDataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\n"
+                  "120\t120\t0\t2\tmm\nFrame#\tTime\ta\t\t\tb\nX1\tY1\tZ1\tX2\tY2\tZ2\n"),
+    ("empty.tsv", "NO_OF_FRAMES\t0\nNO_OF_MARKERS\t2\nFREQUENCY\t100\nMARKER_NAMES\ta\tb\n")])
+def test_a_file_of_no_frames_says_so(empty_scene, bpy_module, tmp_path, name, text):
+    """A TRC or TSV with a header and no data rows was reported as "no marker points (analog data only?)"."""
+    path = tmp_path / name
+    path.write_text(text)
+    assert read_take(path).n_points == 2
+    with pytest.raises(RuntimeError, match=f"{name}: the file holds no frames .*; nothing imported") as info:
+        bpy_module.ops.mocap_autolabel.import_markers(filepath=str(path))
+    assert "analog" not in str(info.value) and len(bpy_module.data.collections) == 0
+
+
 def test_menu_and_file_handler_registered(bpy_module):
     assert hasattr(bpy_module.types, "MOCAPAL_FH_markers")
     fh = bpy_module.types.MOCAPAL_FH_markers

@@ -436,6 +436,23 @@ def test_export_labeled_c3d_and_overlay(labeled, tmp_path):
     assert geo["colors"].shape == (len(geo["points"]), 4) and len(geo["lines"]) % 2 == 0
 
 
+def test_export_labeled_c3d_to_any_path_and_not_to_a_folder(labeled, tmp_path):
+    """An upper-case .C3D failed ("No such file or directory: .x....partial.C3D") and left a .partial.C3D.c3d
+    behind; a folder was reported by its hidden temporary name."""
+    bpy, coll = labeled
+    from mocap_autolabel.core.take import read_take
+
+    out = tmp_path / "export" / "Überprüft take.C3D"
+    assert bpy.ops.mocap_autolabel.export_labeled(filepath=str(out)) == {"FINISHED"}
+    assert read_take(out).names[:19] == state(coll).labeling.names
+    folder = tmp_path / "export" / "folder.c3d"
+    folder.mkdir()
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.mocap_autolabel.export_labeled(filepath=str(folder))
+    assert str(info.value).strip().splitlines()[-1] == f"Error: {folder}: is a folder; give a file name"
+    assert sorted(p.name for p in out.parent.iterdir()) == ["folder.c3d", out.name]  # no partial file
+
+
 @pytest.mark.slow
 def test_cli_label_writes_a_review_scene_the_panel_adopts(empty_scene, bpy_module, take_file, tmp_path):
     from mocap_autolabel.cli import main

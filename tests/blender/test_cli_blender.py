@@ -50,6 +50,20 @@ def test_import_failure_writes_nothing(tmp_path, capsys):
     assert not blend.exists() and capsys.readouterr().err.startswith(f"error: {bad}: ")
 
 
+def test_import_refuses_a_scale_of_zero_and_a_file_of_no_frames_in_one_line(tmp_path, bpy_module, capsys):
+    """Both raised a traceback out of the import command."""
+    src, blend = tmp_path / "take.c3d", tmp_path / "never.blend"
+    write_c3d(small_take(frames=20, points=3), src)
+    assert main(["import", str(src), "--blend", str(blend), "--scale", "0"]) == 1
+    assert capsys.readouterr().err.strip() == "error: Scale must be above 0 (got 0); nothing imported"
+    empty = tmp_path / "empty.tsv"
+    empty.write_text("NO_OF_FRAMES\t0\nNO_OF_MARKERS\t1\nFREQUENCY\t100\nMARKER_NAMES\ta\n")
+    assert main(["import", str(empty), "--blend", str(blend)]) == 1
+    assert capsys.readouterr().err.strip() == f"error: {empty}: the file holds no frames (no data rows or " \
+                                              f"samples); nothing imported"
+    assert sorted(os.listdir(tmp_path)) == ["empty.tsv", "take.c3d"]
+
+
 def test_blenders_own_save_lines_stay_out_of_the_output(tmp_path):
     """bpy's 'Info: Saved copy as ".x.1a2b.partial.blend"' named a temporary file the user never sees."""
     pytest.importorskip("bpy", reason="the bpy module (pip install bpy==5.0.1) is not installed")

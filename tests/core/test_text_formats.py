@@ -86,6 +86,23 @@ def test_a_rate_that_is_no_rate_is_one_clear_error(tmp_path, rate):
         read_take(path)
 
 
+@pytest.mark.parametrize("rate", ["1e-320", "1e-6", "0.5"])
+def test_an_implausible_rate_is_refused_at_read_time(tmp_path, rate, capsys):
+    """Found by the fuzzer: a subnormal DataRate (1e-320) was read, and label then wrote a C3D of rate 0 (the
+    file's float32) that the tool itself refuses; 1e-6 Hz was read too."""
+    from mocap_autolabel.cli import main
+
+    path = _patched(tmp_path, data_path(*TRC), "120\t120\t27", f"{rate}\t{rate}\t27")
+    message = f"{path}: no usable frame rate (DataRate '{rate}', CameraRate '{rate}'; expected 1 to 1,000,000 " \
+              f"frames per second)"
+    with pytest.raises(MocapInputError) as info:
+        read_take(path)
+    assert str(info.value) == message
+    out = tmp_path / "labeled.c3d"
+    assert main(["label", str(path), "-o", str(out)]) == 1
+    assert capsys.readouterr().err.strip() == f"error: {message}" and not out.exists()
+
+
 def test_trc_damage_that_no_count_explains(tmp_path):
     """Found by the fuzzer: a frame number Blender cannot key, and a huge NumMarkers with the names
     line gone (it made 2^31 names)."""

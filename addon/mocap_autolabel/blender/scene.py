@@ -66,6 +66,15 @@ def take_collection_name(take: Take) -> str:
     return name
 
 
+def check_options(options: ImportOptions) -> None:
+    """Raise :class:`MocapInputError` for options that cannot import a take: a Scale of 0 or below (or
+    not a number) would collapse or mirror every marker, not scale it."""
+    from ..core.errors import MocapInputError
+
+    if not (np.isfinite(options.scale) and options.scale > 0):
+        raise MocapInputError(None, f"Scale must be above 0 (got {options.scale:g}); nothing imported")
+
+
 def check_importable(take: Take, options: ImportOptions, label: str = "") -> np.ndarray:
     """The slots to import; raises :class:`MocapInputError` when there is nothing to import, so that
     nothing is created and the scene's rate and range stay as they were (an analog-only C3D, such as
@@ -73,8 +82,11 @@ def check_importable(take: Take, options: ImportOptions, label: str = "") -> np.
     from ..core.errors import MocapInputError
 
     label = label or take.source or "take"
-    if take.n_points == 0 or take.n_frames == 0:
+    check_options(options)
+    if take.n_points == 0:
         raise MocapInputError(label, "the file holds no marker points (analog data only?); nothing imported")
+    if take.n_frames == 0:
+        raise MocapInputError(label, "the file holds no frames (no data rows or samples); nothing imported")
     slots = selected_points(take, options.name_filter)
     if not len(slots):
         raise MocapInputError(label, f"no point matches the Point Names pattern {options.name_filter!r} "

@@ -46,7 +46,7 @@ def _write_report(path: str, report: dict) -> None:
     """``report`` as JSON at ``path``, whole or not at all (a folder or unwritable path raises OSError)."""
     from ..core.atomic import atomic_output
 
-    if os.path.isdir(path):  # else the rename fails with a confusing temporary name in the message
+    if os.path.isdir(path):  # atomic_output refuses it too; this says which output wants a file name
         raise IsADirectoryError(21, "is a folder; give a file name for the report", path)
     with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8") as fh:
         json.dump(report, fh, indent=1)

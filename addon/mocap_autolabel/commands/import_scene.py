@@ -13,22 +13,23 @@ def _import(args) -> int:
     if bpy is None:
         return EXIT_FAILED
     from ..blender.export import save_blend
-    from ..blender.scene import ImportOptions, build_take
+    from ..blender.scene import ImportOptions, build_take, check_options
     from ..core.atomic import atomic_output
     from ..core.quiet import silenced_stdout
     from ..core.take import read_take
 
-    try:
-        take = read_take(args.file)
-    except Exception as exc:
-        return _fail(args.file, exc)
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
     options = ImportOptions(scale=args.scale, frame_offset=args.frame_offset, name_filter=args.names,
                             as_point_cloud=args.point_cloud)
-    collection = build_take(take, scene, options)
-    with silenced_stdout():
-        save_blend(args.blend)
+    try:
+        check_options(options)  # a bad --scale, before the file is read
+        take = read_take(args.file)
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        scene = bpy.context.scene
+        collection = build_take(take, scene, options)  # nothing to import: one line, not a traceback
+        with silenced_stdout():
+            save_blend(args.blend)
+    except Exception as exc:
+        return _fail(args.file, exc)
     from ..blender.pointcloud import CLOUD, is_cloud
 
     cloud = next((o for o in collection.objects if is_cloud(o)), None)
@@ -41,8 +42,11 @@ def _import(args) -> int:
         "scene_fps": scene.render.fps / scene.render.fps_base,
     }
     if args.summary:
-        with atomic_output(args.summary) as tmp, open(tmp, "w") as fh:
-            json.dump(summary, fh, indent=2)
+        try:
+            with atomic_output(args.summary) as tmp, open(tmp, "w") as fh:
+                json.dump(summary, fh, indent=2)
+        except OSError as exc:  # names the summary (atomic_output), not the take
+            return _fail(args.summary, exc)
     shown = summary["empties"] if cloud is None else f"{summary['point_cloud']['markers']} point-cloud"
     print(f"{args.file}: {shown} markers x {take.n_frames} frames -> {args.blend}")
     for warning in take.warnings:

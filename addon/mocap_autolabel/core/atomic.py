@@ -3,28 +3,76 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import secrets
 from collections.abc import Iterator
 
+#: Characters of the target's name kept in the temporary name: with the token, ".partial" and the
+#: extension it stays under the 255 bytes a file name may hold (4 bytes a character at most in UTF-8).
+STEM_CHARS = 40
+
 
 @contextlib.contextmanager
-def atomic_output(path: str | os.PathLike) -> Iterator[str]:
+def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterator[str]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` if the block succeeds.
 
     On any exception the temporary file is removed and ``path`` is left untouched, so an
-    interrupted or failed write never leaves a half-written output.
+    interrupted or failed write never leaves a half-written output. An OSError names ``path``,
+    never the hidden temporary name: a folder at ``path``, and a folder that cannot be written,
+    are refused before the block runs, with their real cause.
+
+    A device or pipe at ``path`` (``/dev/stdout``, ``/dev/null``) is written in place: renaming
+    onto it would replace the device itself.
+
+    Args:
+        path: the output file.
+        suffix: how the temporary name ends (default: ``path``'s extension), for writers that
+            append their own extension to any other name (ezc3d adds ".c3d" unless the name ends
+            so, as ``x.C3D`` does not). Such a writer names its own file, so it cannot write to a
+            device or pipe: that is refused.
+
+    Raises:
+        OSError: naming ``path``.
     """
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise IsADirectoryError(errno.EISDIR, "is a folder; give a file name", path)
+    if os.path.exists(path) and not os.path.isfile(path):
+        if suffix is not None:
+            raise OSError(errno.EINVAL, "is not a regular file (a device or pipe); give a file name", path)
+        try:
+            yield path
+        except OSError as exc:
+            _name(exc, path, path)
+            raise
+        return
     folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
     stem, ext = os.path.splitext(os.path.basename(path))
-    # Not created here: writers such as Blender back up an existing target as ``.blend1``.
-    tmp = os.path.join(folder, f".{stem}.{secrets.token_hex(4)}.partial{ext}")
+    ending = ext if suffix is None else suffix
+    tmp = os.path.join(folder, f".{stem[:STEM_CHARS]}.{secrets.token_hex(4)}.partial{ending}")
+    try:
+        os.makedirs(folder, exist_ok=True)
+        # Created and removed at once, so that a folder that cannot be written fails here with its real
+        # cause (a writer may say something confusing, and ezc3d says nothing at all). Not left in place:
+        # writers such as Blender back up an existing target as ``.blend1``.
+        os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        os.remove(tmp)
+    except OSError as exc:
+        raise type(exc)(exc.errno, f"cannot write in {folder} ({exc.strerror})", path) from None
     try:
         yield tmp
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.remove(tmp)
+        if isinstance(exc, OSError):
+            _name(exc, path, tmp)
         raise
+
+
+def _name(exc: OSError, path: str, tmp: str) -> None:
+    """``exc`` naming ``path`` where it named ``tmp`` or no file (a failed write() names none): the
+    user's output, not the hidden temporary name nor the input the caller was reading."""
+    if exc.filename is None or exc.filename == tmp:
+        exc.filename, exc.filename2 = path, None

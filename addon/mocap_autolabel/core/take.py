@@ -15,6 +15,7 @@ from .formats import reader_for
 from .take_data import (
     DAMAGED_DISTANCE_M,
     MAX_RATE,
+    MIN_RATE,
     UNIT_SCALE,
     UNLABELED_NAME,
     Take,
@@ -23,7 +24,7 @@ from .take_data import (
     unit_scale,
 )
 
-__all__ = ["ABSURD_DISTANCE_M", "DAMAGED_DISTANCE_M", "MAX_RATE", "UNIT_SCALE", "UNLABELED_NAME", "Take",
+__all__ = ["ABSURD_DISTANCE_M", "DAMAGED_DISTANCE_M", "MAX_RATE", "MIN_RATE", "UNIT_SCALE", "UNLABELED_NAME", "Take",
            "check_plausible", "mark_missing", "read_take", "to_metres", "unit_scale"]
 
 #: A marker further than this from the origin (metres) means wrong units: no capture volume is that big.

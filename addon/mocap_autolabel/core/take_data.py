@@ -22,6 +22,9 @@ UNLABELED_NAME = re.compile(r"^(\*\d+|M\d{3,}|Unlabeled\s*\d*|)$", re.IGNORECASE
 
 #: Frame rates at or above this (frames per second) are damage, not a capture system's.
 MAX_RATE = 1e6
+#: Frame rates below this are damage too: no marker capture records less than a frame a second, and a
+#: subnormal rate (1e-320 Hz) is 0 as a C3D's float32, a file that no reader (this one included) accepts.
+MIN_RATE = 1.0
 
 #: A coordinate further than this (metres) is damage, not a position: a unit mistake (metres read
 #: as millimetres) stays under 1e4 m, and beyond 1e9 the squares of distances overflow float32.

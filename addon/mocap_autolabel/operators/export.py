@@ -42,10 +42,22 @@ class MOCAPAL_OT_export_labeled(bpy.types.Operator, ExportHelper):
         try:
             export_labeled_c3d(coll, path)  # in the take's own frames and units
         except (MocapInputError, OSError, ValueError) as exc:
-            self.report({"ERROR"}, f"{path}: {exc}")
+            self.report({"ERROR"}, _one_line(exc, path))
             return {"CANCELLED"}
         self.report({"INFO"}, f"Wrote {path}")
         return {"FINISHED"}
+
+
+def _one_line(exc: Exception, path: str) -> str:
+    """The report of a failed export: the file it names and what is wrong, once (an input error names
+    its file itself; an OSError's text repeats its errno and file)."""
+    from ..core.errors import MocapInputError
+
+    if isinstance(exc, MocapInputError):
+        return str(exc)
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{exc.filename or path}: {exc.strerror}"
+    return f"{path}: {exc}"
 
 
 classes = (MOCAPAL_OT_export_labeled,)

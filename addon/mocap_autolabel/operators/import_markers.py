@@ -21,8 +21,9 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
     files: CollectionProperty(type=bpy.types.OperatorFileListElement, options={"HIDDEN", "SKIP_SAVE"})
     directory: StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
 
+    # No hard minimum: Blender would clamp 0 or -1 to it silently; execute refuses a Scale of 0 or below.
     scale: FloatProperty(name="Scale", description="Factor applied to positions (metres) on import",
-                         default=1.0, min=1e-6, soft_max=100.0)
+                         default=1.0, soft_min=0.001, soft_max=100.0)
     frame_offset: IntProperty(name="Frame Offset", description="Added to the file's frame numbers",
                               default=0)
     name_filter: StringProperty(name="Point Names", default="*",
@@ -49,7 +50,7 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
         return ImportHelper.invoke(self, context, event)
 
     def execute(self, context):
-        from ..blender.scene import ImportOptions, build_take, check_importable
+        from ..blender.scene import ImportOptions, build_take, check_importable, check_options
         from ..core.errors import MocapInputError
         from ..core.take import read_take
 
@@ -58,6 +59,11 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
         paths = self.paths()
         if not paths:
             self.report({"ERROR"}, "No file given")
+            return {"CANCELLED"}
+        try:
+            check_options(options)  # once, not once per file
+        except MocapInputError as exc:
+            self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         imported = 0
         for path in paths:

@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 
 from ..errors import MocapInputError
-from ..take_data import MAX_RATE
+from ..take_data import MAX_RATE, MIN_RATE
 
 
 def read_lines(path: str) -> list[str]:
@@ -123,16 +123,18 @@ def frame_count_note(field: str, text: str | None, rows: int, numbers: list[str]
 
 
 def frame_rate(path: str, *stated: tuple[str, str | None]) -> float:
-    """The first of ``stated`` header fields ``(name, text)`` that is a positive, finite rate in Hz."""
+    """The first of ``stated`` header fields ``(name, text)`` that is a plausible rate in Hz: finite, from
+    ``MIN_RATE`` to below ``MAX_RATE`` (any other is damage: see there)."""
     for _, text in stated:
         try:
             rate = float(str(text).strip())
         except ValueError:
             continue
-        if np.isfinite(rate) and 0 < rate < MAX_RATE:
+        if np.isfinite(rate) and MIN_RATE <= rate < MAX_RATE:
             return rate
     said = ", ".join(f"{name} {text!r}" for name, text in stated)
-    raise MocapInputError(path, f"no usable frame rate ({said}; expected a number of frames per second above 0)")
+    raise MocapInputError(path, f"no usable frame rate ({said}; expected {MIN_RATE:g} to {MAX_RATE:,.0f} frames per "
+                                f"second)")
 
 
 def first_frame_number(rows: list[str]) -> tuple[int, str]:

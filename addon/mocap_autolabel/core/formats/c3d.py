@@ -25,7 +25,7 @@ import numpy as np
 
 from ..atomic import atomic_output
 from ..errors import MocapInputError
-from ..take_data import MAX_RATE, Take, mark_missing, to_metres, unit_scale
+from ..take_data import MAX_RATE, MIN_RATE, Take, mark_missing, to_metres, unit_scale
 from ..version import __version__
 
 BLOCK = 512
@@ -276,10 +276,10 @@ def _point_rate(path: str, reader) -> tuple[float, str]:
     """Frames per second: POINT:RATE, else the header's; and a warning when the two disagree."""
     header_rate = float(reader.header.frame_rate)
     param_rate = _number_param(reader, "POINT:RATE")
-    usable = [r for r in (param_rate, header_rate) if r is not None and np.isfinite(r) and 0 < r < MAX_RATE]
+    usable = [r for r in (param_rate, header_rate) if r is not None and np.isfinite(r) and MIN_RATE <= r < MAX_RATE]
     if not usable:
         raise MocapInputError(path, f"no usable frame rate (POINT:RATE is {param_rate}, the header's rate "
-                                    f"{header_rate:g}; expected a number of frames per second above 0)")
+                                    f"{header_rate:g}; expected {MIN_RATE:g} to {MAX_RATE:,.0f} frames per second)")
     if len(usable) == 2 and not np.isclose(usable[0], usable[1], rtol=1e-4):
         return usable[0], (f"frame rate disagrees: {usable[0]:g} Hz in POINT:RATE, {usable[1]:g} Hz in "
                            f"the header; read {usable[0]:g} Hz")
@@ -540,10 +540,21 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
         take: positions in metres.
         path: output file; it appears complete or not at all.
         units: POINT:UNITS of the file ("mm" by default, as capture systems write).
+
+    Raises:
+        MocapInputError: a take of no frames, or of a rate :func:`read_c3d` refuses (nothing is written).
+        OSError: naming ``path`` (a folder, a folder that cannot be written, a full disk).
     """
     import ezc3d
 
     path = os.fspath(path)
+    # Written files must read back: ezc3d cannot write a take of 0 frames (it divides by the frame count), and
+    # a rate the reader refuses (a subnormal one is 0 as the file's float32) would make a file no one reads.
+    if take.n_frames == 0:
+        raise MocapInputError(path, "cannot write a C3D of a take with no frames (0 frames)")
+    if not MIN_RATE <= np.float32(take.rate) < MAX_RATE:
+        raise MocapInputError(path, f"cannot write a C3D at {take.rate:g} frames per second (expected "
+                                    f"{MIN_RATE:g} to {MAX_RATE:,.0f})")
     scale = 1.0 / unit_scale(units, path)
     n_f, n_p = take.n_frames, take.n_points
     c = ezc3d.c3d()
@@ -565,7 +576,7 @@ def write_c3d(take: Take, path: str | os.PathLike, units: str = "mm") -> None:
     valid = take.valid.T
     c["data"]["meta_points"]["residuals"] = np.where(valid, 0.0, -1.0)[np.newaxis]
     c["header"]["points"]["first_frame"] = max(int(take.first_frame) - 1, 0)
-    with atomic_output(path) as tmp:
+    with atomic_output(path, suffix=".c3d") as tmp:  # ezc3d appends ".c3d" to any other name (x.C3D)
         c.write(tmp)
         _check_written(tmp, path, n_f, n_p)
         _write_fourth_words(tmp, _fourth_words(take, scale))
@@ -612,6 +623,8 @@ def _check_written(tmp: str, path: str, n_frames: int, n_points: int) -> None:
     The header's DATA_START block (word 9) plus ``n_frames x n_points`` REAL samples of 16 bytes is the
     least a whole file holds; a full disk or a file size limit leaves less.
     """
+    if not os.path.isfile(tmp):  # the writer could not create it
+        raise OSError(errno.EIO, "the C3D writer could not create the file", path)
     size = os.path.getsize(tmp)
     with open(tmp, "rb") as f:
         header = f.read(18)
