@@ -72,9 +72,12 @@ bench: $(VENV)/.extras-$(BENCH_EXTRAS)
 	$(BIN)/python benchmarks/review.py
 	$(BIN)/python benchmarks/fuzz.py
 	$(BIN)/python benchmarks/gap_fill.py
+	$(BIN)/python benchmarks/layouts.py
 
-## models: retrain every shipped model (set, perm, cnn for han19 and glove13), seeded, then recalibrate
-## the segment confidences; about 1.5 hours on 2 cores
+## models: retrain every shipped model (set_any for every layout, then set, perm, cnn for han19 and glove13),
+## seeded, then recalibrate the segment confidences; about 2.5 hours on 2 cores. set_any checkpoints itself
+## (training/checkpoints/set_any.pt): stopped, it resumes where it was when run again
+## (python -m training --any for that model alone; benchmarks/layouts.py measures it)
 models: $(VENV)/.extras-$(TRAIN_EXTRAS)
 	$(BIN)/python -m training --all
 	$(BIN)/python -m training.confidence

@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from datasets import HAN2018, write_report  # noqa: E402
+import temporal  # noqa: E402
+from datasets import HAN2018, glove13_take, write_report  # noqa: E402
 from mocap_autolabel.core.errors import MocapInputError  # noqa: E402
 from mocap_autolabel.core.labelers.gmm import GmmLabeler  # noqa: E402
 from mocap_autolabel.core.layout import Layout, load_layout  # noqa: E402
@@ -41,6 +42,7 @@ from mocap_autolabel.core.metrics import clustered_se, score_labeling, segments_
 from mocap_autolabel.core.process import Outputs, process_take  # noqa: E402
 from mocap_autolabel.core.settings import LabelSettings  # noqa: E402
 from mocap_autolabel.core.synth.generate import corrupt_take, save_synth, synthesize  # noqa: E402
+from mocap_autolabel.core.take import Take  # noqa: E402
 from temporal import Case, glove_case  # noqa: E402
 from two_hands import han_pairs  # noqa: E402
 
@@ -95,6 +97,23 @@ def han_cases(han19: Layout, names: list[str], limit: int | None) -> list[Case]:
             take, truth, _ = corrupt_take(s, 120.0, seed=1000 * u + i)
             cases.append(Case(take, truth, fit, s[0]))
     return cases
+
+
+def glove_subset_case(layout: Layout, fit_frames: int = 600) -> Case:
+    """The real glove recording reduced to ``layout``'s markers (the glove's others removed, the body and
+    pillow markers kept as distractors), cut and packed as the temporal benchmark does."""
+    glove13 = load_layout("glove13")
+    take, slot = glove13_take(glove13)
+    keep = [i for i, s in enumerate(slot) if s < 0 or glove13.names[s] in layout.names]
+    reduced = Take(positions=take.positions[:, keep], names=[take.names[i] for i in keep], rate=take.rate,
+                   source=take.source)
+    original = glove13_take
+    try:  # glove_case reads the recording through datasets.glove13_take: hand it the reduced take
+        temporal.glove13_take = lambda lay: (reduced, np.array([lay.names.index(n) if n in lay.names else -1
+                                                                for n in reduced.names]))
+        return glove_case(layout, fit_frames)
+    finally:
+        temporal.glove13_take = original
 
 
 def run(cases: list[Case], layout: Layout, method: str) -> dict:
@@ -207,10 +226,8 @@ def main() -> int:
             continue
         base = han19 if source == "han" else glove13
         layout = subset(base, names, name.split(" ")[0])
-        cases = han_cases(han19, names, args.limit) if source == "han" else [glove_case(layout)]
+        cases = han_cases(han19, names, args.limit) if source == "han" else [glove_subset_case(layout)]
         for method in args.methods:
-            if method == "nearest" and source == "glove":
-                pass
             r = run(cases, layout, method)
             fps = sum(c.take.n_frames for c in cases) / max(r["seconds"], 1e-9)
             lines.append(f"| {name} | {len(layout)} | {'yes' if has_hand_markers(layout) else 'no'} | {method} | "
