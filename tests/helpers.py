@@ -84,7 +84,8 @@ def select(bpy, *objs):
 
 def same_outputs(a, b) -> list[str]:
     """The take outputs of two batch folders (paths), compared: labeled C3Ds byte for byte, reports but for
-    their timings. Returns the names of the takes compared; asserts no temporary file is left in either."""
+    their timings and the id of the run that wrote them. Returns the names of the takes compared; asserts no
+    temporary file is left in either."""
     import json
     from pathlib import Path
 
@@ -94,19 +95,20 @@ def same_outputs(a, b) -> list[str]:
     for name in names:
         assert (a / f"{name}.labeled.c3d").read_bytes() == (b / f"{name}.labeled.c3d").read_bytes(), name
         ra, rb = (json.loads((d / f"{name}.report.json").read_text()) for d in (a, b))
-        ra.pop("seconds"), rb.pop("seconds")
+        for r in (ra, rb):
+            r.pop("seconds"), r.pop("run", None)
         assert ra == rb, name
     for folder in (a, b):
         assert not [p.name for p in folder.rglob("*") if ".partial" in p.name]
     return names
 
 
-def worker_processes() -> list[int]:
-    """Process ids of this process's worker processes: children started by multiprocessing's spawn
-    (``batch --jobs``), and children of its fork server (a local Dask cluster's workers)."""
+def worker_processes(parent: int | None = None) -> list[int]:
+    """Process ids of the worker processes of this process (or of process ``parent``): children started by
+    multiprocessing's spawn (``batch --jobs``), and children of its fork server (a local Dask cluster's workers)."""
     import os
 
-    me, procs = os.getpid(), []
+    me, procs = parent or os.getpid(), []
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue
@@ -153,3 +155,16 @@ def run_killing_a_worker(run, delay: float, rng) -> tuple[object, bool]:
         stop.set()
         thread.join()
     return result, bool(killed)
+
+
+def alive(pids) -> list[int]:
+    """Those of ``pids`` still running (a process ended but not yet reaped, a zombie, is not)."""
+    running = []
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                if f.read().rsplit(")", 1)[1].split()[0] != "Z":
+                    running.append(pid)
+        except (OSError, IndexError):
+            pass
+    return running

@@ -2,24 +2,32 @@
 
 ``run_batch(inputs, out_dir, settings)`` labels every take (and optionally solves the hand and
 writes .blend / FBX) in up to ``jobs`` processes. Per take it writes, each atomically:
-``<name>.labeled.c3d`` and, last, ``<name>.report.json`` (the mark of a finished take: a rerun
-skips takes whose report and outputs exist, unless ``force``). A bad take is reported with its
-reason and skipped; the others go on. At the end ``summary.csv`` and ``summary.json``.
+``<name>.labeled.c3d`` and, last, ``<name>.report.json`` (the mark of a finished take). The report
+records what made the outputs: the input (its path, size, mtime and SHA-256) and a digest of the
+settings that shape them (:func:`settings_digest`). A rerun skips a take whose record matches its input
+and settings now and whose outputs are all there, unless ``force``; otherwise the take is done again,
+its earlier outputs removed first. An input keeps its output name in a folder across runs, and no other
+input gets it (:func:`find_takes`). A bad take is reported with its reason and skipped; the others go on.
+At the end ``summary.csv`` and ``summary.json``.
 
 Only the standard library at import time: the work happens in :func:`process_take`.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import errno
 import functools
 import glob
+import hashlib
 import io
 import json
 import multiprocessing
 import os
+import re
+import secrets
 import sys
 import time
 import tomllib
@@ -140,11 +148,15 @@ def run_cache() -> RunCache:
     return RunCache()
 
 
-def find_takes(inputs: list[str]) -> list[tuple[str, str]]:
+def find_takes(inputs: list[str], owners: dict[str, str] | None = None) -> list[tuple[str, str]]:
     """``(path, output name)`` for every take in files, folders (recursively) and globs, sorted.
 
     The output name keeps a folder input's sub-folders (``sub/take``), so equal file names in
     different folders do not collide; remaining collisions get ``-2``, ``-3``...
+
+    ``owners``: the output names already given in the output folder, each to its input's absolute path
+    (:func:`read_records`). An input keeps the name it was given there, and no other input gets a name
+    that is given, so two inputs of one name never share outputs, whichever of them a run holds.
     """
     found: list[tuple[str, str]] = []
     for item in inputs:
@@ -163,36 +175,148 @@ def find_takes(inputs: list[str]) -> list[tuple[str, str]]:
     unique: dict[str, tuple[str, str]] = {}
     for path, name in found:  # a take named twice (folder and glob) is done once
         unique.setdefault(os.path.abspath(path), (path, name))
-    seen: dict[str, int] = {}
-    out = []
-    for path, name in sorted(unique.values()):
-        n = seen.get(name, 0) + 1
-        seen[name] = n
-        out.append((path, name if n == 1 else f"{name}-{n}"))
-    return out
+    owners = owners or {}
+    owned: dict[str, list[str]] = {}
+    for name, owner in owners.items():
+        owned.setdefault(owner, []).append(name)
+    taken = set(owners)
+    chosen: dict[str, str] = {}
+    order = sorted(unique.items(), key=lambda item: item[1])
+    for key, (_, base) in order:  # the name given to this input in an earlier run, its own name first
+        mine = [n for n in owned.get(key, ()) if n == base or re.fullmatch(re.escape(base) + r"-\d+", n)]
+        if mine:
+            chosen[key] = min(mine, key=lambda n: (n != base, len(n), n))
+    for key, (_, base) in order:  # then an input's own name, where no other input has it
+        if key not in chosen and base not in taken:
+            chosen[key] = base
+            taken.add(base)
+    for key, (_, base) in order:  # then -2, -3... past every name given
+        if key not in chosen:
+            n = 2
+            while f"{base}-{n}" in taken:
+                n += 1
+            chosen[key] = f"{base}-{n}"
+            taken.add(chosen[key])
+    return sorted((path, chosen[key]) for key, (path, _) in unique.items())
 
 
-def _finished(out_dir: str, name: str, settings: BatchSettings) -> dict | None:
-    """The report of a take whose outputs are all complete, or None if it must be (re)done."""
+REPORT = ".report.json"
+
+
+def read_records(out_dir: str) -> dict[str, dict]:
+    """Every take's report in ``out_dir`` (its sub-folders too), by output name; unreadable ones left out."""
+    records: dict[str, dict] = {}
+    for root, _, files in os.walk(out_dir):
+        for file in files:
+            if file.endswith(REPORT) and not file.startswith("."):
+                path = os.path.join(root, file)
+                try:
+                    with open(path, encoding="utf-8") as f:
+                        report = json.load(f)
+                except (OSError, ValueError):
+                    continue
+                if isinstance(report, dict):
+                    records[os.path.relpath(path, out_dir)[: -len(REPORT)]] = report
+    return records
+
+
+#: Settings that say how and where a batch runs, not what its outputs hold.
+RUN_ONLY = ("jobs", "scheduler", "force", "extra")
+
+
+@functools.cache
+def _file_digest(path: str, size: int, mtime_ns: int) -> str:
+    """SHA-256 of a file's bytes; cached by its size and mtime (one read per file per process)."""
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
+def _digest(path: str) -> str | None:
     try:
-        with open(os.path.join(out_dir, name + ".report.json"), encoding="utf-8") as f:
-            report = json.load(f)
-    except (OSError, ValueError):
+        st = os.stat(path)
+        return _file_digest(os.path.abspath(path), st.st_size, st.st_mtime_ns)
+    except OSError:
         return None
-    if report.get("status") != "ok":
+
+
+def settings_digest(settings: BatchSettings) -> str:
+    """A digest of what shapes a take's outputs besides its input: the settings (all but :data:`RUN_ONLY`;
+    the output flags too, as they choose the files), the package's version and the bytes of the files they
+    name (model, calibrations, a layout .toml) and of the shipped models (a retrained model labels anew)."""
+    from .core.version import __version__
+
+    shaping = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings) if f.name not in RUN_ONLY}
+    files = [p.strip() for key in ("model", "calibration") for p in (getattr(settings, key) or "").split(",")]
+    if settings.layout and settings.layout.endswith(".toml"):
+        files.append(settings.layout)
+    shipped = sorted(glob.glob(os.path.join(os.path.dirname(os.path.abspath(__file__)), "models", "*")))
+    blob = json.dumps({"settings": shaping, "version": __version__,
+                       "files": [_digest(p) for p in files if p], "shipped": [_digest(p) for p in shipped]},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:32]
+
+
+def input_record(path: str) -> dict | None:
+    """What identifies an input's bytes: size, mtime and SHA-256; None if it cannot be read."""
+    try:
+        st = os.stat(path)
+        return {"size": st.st_size, "mtime_ns": st.st_mtime_ns,
+                "sha256": _file_digest(os.path.abspath(path), st.st_size, st.st_mtime_ns)}
+    except OSError:
         return None
-    outputs = report.get("outputs", {})
-    if not os.path.isfile(os.path.join(out_dir, name + ".labeled.c3d")):
-        return None
-    if not all(os.path.isfile(os.path.join(out_dir, f)) for f in outputs.values()):
-        return None
-    if settings.fill and "fill" not in report:  # filled now, not then
-        return None
-    # Every rig file asked for now was written then (one per hand for a take of two hands).
-    for kind in ("blend", "fbx", "bvh", "html"):
-        if getattr(settings, kind) and not any(k == kind or k.startswith(kind + "_") for k in outputs):
-            return None
-    return report
+
+
+def _same_input(path: str, record: dict | None) -> bool:
+    """Whether ``path`` still holds the bytes ``record`` describes; the file is read only when its size is the
+    same but its mtime is not (a copy, a touch), so a rerun of 100s of unchanged takes only stats them."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return False
+    if not isinstance(record, dict) or record.get("size") != st.st_size:
+        return False
+    if record.get("mtime_ns") == st.st_mtime_ns:
+        return True
+    return _digest(path) == record.get("sha256")
+
+
+def _finished(report: dict | None, path: str, out_dir: str, name: str, made_with: str) -> bool:
+    """Whether ``report`` (the take's record in ``out_dir``) says its outputs are complete and were made from
+    this input as it is now with these settings (``made_with``: :func:`settings_digest`)."""
+    if not report or report.get("status") != "ok" or report.get("made_with") != made_with:
+        return False
+    if report.get("file") != os.path.abspath(path) or not _same_input(path, report.get("input")):
+        return False
+    outputs = report.get("outputs") or {}
+    folder = os.path.join(out_dir, os.path.dirname(name))
+    return "labeled" in outputs and all(os.path.isfile(os.path.join(folder, f)) for f in outputs.values())
+
+
+#: Output files of a take named by its name alone (a two-hand take's per-side rig files are known only
+#: from its report: ``take_left.fbx`` could be another take's).
+STEM_OUTPUTS = (".labeled.c3d", ".blend", ".fbx", ".bvh", ".report.html")
+
+
+def _clear_outputs(out_dir: str, name: str) -> None:
+    """Remove a take's report and outputs before it is done again: its report first (a run killed meanwhile
+    leaves no record of outputs that are gone), then every output it lists, so what a take's report lists
+    is what is on disk, whatever the settings of the run before."""
+    report_path = os.path.join(out_dir, name + REPORT)
+    try:
+        with open(report_path, encoding="utf-8") as f:
+            listed = list((json.load(f).get("outputs") or {}).values())
+    except (OSError, ValueError, AttributeError):
+        listed = []
+    folder = os.path.join(out_dir, os.path.dirname(name))
+    stem = os.path.basename(name)
+    files = [report_path] + [os.path.join(folder, f) for f in listed
+                             if isinstance(f, str) and f == os.path.basename(f) and f.startswith(stem)]
+    files += [os.path.join(out_dir, name + suffix) for suffix in STEM_OUTPUTS]
+    for file in files:
+        try:
+            os.remove(file)
+        except FileNotFoundError:
+            pass
 
 
 def _worker_init() -> None:
@@ -209,35 +333,116 @@ def _worker_init() -> None:
     sys.path[:] = [p for p in sys.path if not os.path.isfile(os.path.join(p or ".", "bpy", "__init__.py"))]
 
 
-def farm_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
+def _end_with_parent(parent: int) -> None:
+    """End this worker process as soon as its batch process (pid ``parent``) ends, killed or not.
+
+    A pool worker otherwise lives on after a SIGKILL or SIGTERM of its batch, labeling the takes queued
+    to it and writing their outputs under a rerun's feet. On Linux the kernel kills it with its parent
+    (``PR_SET_PDEATHSIG``: nothing to poll, and at once, so it writes nothing after); elsewhere a daemon
+    thread polls the parent's id. A whole output is never lost: a killed write leaves only a hidden
+    temporary file, removed by the next run. (The kernel's signal comes when the parent's *thread* that
+    started the worker ends: the pool starts its workers from the thread that submits, :func:`_run_pool`'s,
+    which outlives the pool.)
+    """
+    import signal
+
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            if ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0) == 0:  # PR_SET_PDEATHSIG
+                if os.getppid() != parent:  # it ended before the line above
+                    os._exit(1)
+                return
+        except (OSError, AttributeError):
+            pass
+    if os.name != "posix":  # Windows' getppid keeps naming a parent that is gone: nothing to watch
+        return
+    import threading
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.2)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="mocap_autolabel parent watch", daemon=True).start()
+
+
+def _pool_init(parent: int) -> None:
+    """A pool worker's start: it ends with its batch, and imports the bpy module if it must."""
+    _end_with_parent(parent)
+    _worker_init()
+
+
+def _pool_take(path: str, name: str, out_dir: str, settings: BatchSettings, made_with: str | None,
+               run: str | None) -> None:
+    """:func:`process_take` in a pool worker, which hands back nothing: the parent reads the report written.
+
+    A report (up to 100 kB) sent back through the pool's result pipe takes two writes past 16 kB, or waits
+    on a full pipe: a worker killed in between left a partial message, on which the pool's manager thread
+    then waited for ever, and the other worker on the pipe's lock the killed one held (the hang of
+    tests/core/test_batch_faults.py). A result of a few bytes is one atomic write.
+    """
+    process_take(path, name, out_dir, settings, made_with, run)
+
+
+def farm_take(path: str, name: str, out_dir: str, settings: BatchSettings, made_with: str | None = None,
+              run: str | None = None) -> dict:
     """:func:`process_take` as a task on a Dask worker (a fresh process that may have inherited bpy's paths)."""
     _worker_init()
-    return process_take(path, name, out_dir, settings)
+    return process_take(path, name, out_dir, settings, made_with, run)
 
 
-def failed_report(path: str, name: str, out_dir: str, reason: str) -> dict:
+def failed_report(path: str, name: str, out_dir: str, reason: str, run: str | None = None) -> dict:
     """Write and return the report of a take that never finished (its worker died on every try)."""
     from .core.atomic import atomic_output
 
+    _clear_outputs(out_dir, name)  # what a killed try wrote before its report: the report lists no output
     report = {"file": os.path.abspath(path), "name": name, "status": "failed", "error": f"{path}: {reason}",
-              "seconds": {"total": 0.0}}
-    with atomic_output(os.path.join(out_dir, name + ".report.json")) as tmp, open(tmp, "w", encoding="utf-8") as f:
+              "seconds": {"total": 0.0}} | ({"run": run} if run else {})
+    with atomic_output(os.path.join(out_dir, name + REPORT)) as tmp, open(tmp, "w", encoding="utf-8") as f:
         json.dump(report, f, indent=1)
     return report
 
 
-def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) -> dict:
+def _done_in_run(out_dir: str, name: str, run: str) -> dict | None:
+    """The report a task of this run (``run``) already wrote for the take, whole outputs and all, or None."""
+    try:
+        with open(os.path.join(out_dir, name + REPORT), encoding="utf-8") as f:
+            report = json.load(f)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(report, dict) or report.get("run") != run:
+        return None
+    folder = os.path.join(out_dir, os.path.dirname(name))
+    if not all(os.path.isfile(os.path.join(folder, f)) for f in (report.get("outputs") or {}).values()):
+        return None
+    return report
+
+
+def process_take(path: str, name: str, out_dir: str, settings: BatchSettings, made_with: str | None = None,
+                 run: str | None = None) -> dict:
     """Label one take (and solve its hand) and write its outputs; never raises for a bad take.
+
+    ``made_with``: :func:`settings_digest` of ``settings`` (computed if not given), kept in the report with
+    the input's :func:`input_record`, so a rerun knows whether the outputs are still those it would make.
+    ``run``: the batch run's id, also kept: a task run again for a take this run already finished (a Dask
+    scheduler reruns the tasks a dead worker held) returns that take's report and writes nothing.
 
     Returns the report dict that was written (``status`` "ok" or "failed" with ``error``).
     """
     from .core.atomic import atomic_output
     from .core.errors import MocapInputError
 
+    if run and (done := _done_in_run(out_dir, name, run)) is not None:
+        return done
     start = time.perf_counter()
-    report: dict = {"file": os.path.abspath(path), "name": name, "status": "failed"}
+    # The input's record is taken before it is read: a file changed meanwhile then differs from it on a rerun.
+    report: dict = {"file": os.path.abspath(path), "name": name, "status": "failed", "input": input_record(path),
+                    "made_with": made_with or settings_digest(settings)} | ({"run": run} if run else {})
     timings: dict = {}
     try:
+        _clear_outputs(out_dir, name)
         report.update(_work(path, name, out_dir, settings, timings))
         report["status"] = "ok"
     except MocapInputError as exc:
@@ -249,9 +454,12 @@ def process_take(path: str, name: str, out_dir: str, settings: BatchSettings) ->
             report["error"] = f"{path}: cannot write its outputs in {out_dir}: {exc.strerror}"
     except Exception as exc:  # one bad take must not stop the batch
         report["error"] = f"{path}: unexpected {type(exc).__name__}: {exc}"
+    if report["status"] != "ok":  # a take that failed midway lists no output: none is left behind
+        with contextlib.suppress(OSError):
+            _clear_outputs(out_dir, name)
     timings["total"] = round(time.perf_counter() - start, 4)
     report["seconds"] = timings
-    target = os.path.join(out_dir, name + ".report.json")
+    target = os.path.join(out_dir, name + REPORT)
     with atomic_output(target) as tmp, open(tmp, "w", encoding="utf-8") as f:
         json.dump(report, f, indent=1)
     return report
@@ -443,16 +651,19 @@ def _clean_partials(out_dir: str) -> None:
 
 def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress: str = "bar") -> dict:
     """Process every take; returns the summary (also written as summary.json and summary.csv)."""
-    takes = find_takes(inputs)
     os.makedirs(out_dir, exist_ok=True)
     _clean_partials(out_dir)
+    records = read_records(out_dir)
+    takes = find_takes(inputs, {name: r["file"] for name, r in records.items() if isinstance(r.get("file"), str)})
+    made_with = settings_digest(settings)
+    run = secrets.token_hex(8)  # this run's mark in the reports it writes
     sizes = {name: (os.path.getsize(path) if os.path.isfile(path) else 0) for path, name in takes}
     bar = Progress(sizes, progress, max(1, settings.jobs))
     rows: list[dict] = []
     todo = []
     for path, name in takes:
-        report = None if settings.force else _finished(out_dir, name, settings)
-        if report is not None:
+        report = records.get(name)
+        if not settings.force and _finished(report, path, out_dir, name, made_with):
             bar.event("skipped", name=name)
             rows.append(_row(report, skipped=True))
         else:
@@ -464,14 +675,16 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
 
         with farm_client(settings.scheduler) as client:
             workers = bar.jobs = worker_threads(client)
-            for report in run_on_farm(client, todo, out_dir, settings, farm_take, failed_report):
+            task = functools.partial(farm_take, made_with=made_with, run=run)
+            for report in run_on_farm(client, todo, out_dir, settings, task,
+                                      functools.partial(failed_report, run=run)):
                 rows.append(_finish(bar, report))
     elif settings.jobs <= 1 or len(todo) <= 1:
         for path, name in todo:
             bar.event("start", name=name)
-            rows.append(_finish(bar, process_take(path, name, out_dir, settings)))
+            rows.append(_finish(bar, process_take(path, name, out_dir, settings, made_with, run)))
     else:
-        rows += _run_pool(todo, out_dir, settings, bar)
+        rows += _run_pool(todo, out_dir, settings, bar, made_with, run)
     _clean_partials(out_dir)  # what a worker killed mid-take left (its take was redone or is reported)
     wall = time.perf_counter() - start
     rows.sort(key=lambda r: r["name"])
@@ -489,6 +702,9 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
 
         with atomic_output(os.path.join(out_dir, "index.html")) as tmp, open(tmp, "w", encoding="utf-8") as f:
             f.write(index_page(rows, f"Batch: {os.path.abspath(out_dir)}"))
+    else:  # an earlier run's index would link pages this run removed
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(os.path.join(out_dir, "index.html"))
     bar.event("end", name=f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped")
     return summary
 
@@ -497,7 +713,8 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
 POOL_TRIES = 3
 
 
-def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings, bar: Progress) -> list[dict]:
+def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings, bar: Progress,
+              made_with: str | None = None, run: str | None = None) -> list[dict]:
     """The takes in ``settings.jobs`` spawned processes; a pool whose process died (killed, out of memory) is
     started again for the takes not finished, each up to :data:`POOL_TRIES` times, then reported as failed."""
     rows: list[dict] = []
@@ -506,17 +723,19 @@ def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings
         context = multiprocessing.get_context("spawn")
         while todo:
             broken = []
-            with ProcessPoolExecutor(settings.jobs, mp_context=context, initializer=_worker_init) as pool:
+            with ProcessPoolExecutor(settings.jobs, mp_context=context, initializer=_pool_init,
+                                     initargs=(os.getpid(),)) as pool:
                 pending = {}
                 for path, name in todo:  # no "start" events: the pool decides when a take starts
                     tries[name] += 1
-                    pending[pool.submit(process_take, path, name, out_dir, settings)] = (path, name)
+                    pending[pool.submit(_pool_take, path, name, out_dir, settings, made_with, run)] = (path, name)
                 while pending:
                     finished, _ = wait(pending, return_when=FIRST_COMPLETED)
                     for fut in finished:
                         path, name = pending.pop(fut)
                         try:
-                            rows.append(_finish(bar, fut.result()))
+                            fut.result()
+                            rows.append(_finish(bar, _read_report(out_dir, name)))
                         except BrokenProcessPool:
                             broken.append((path, name))
             todo = []
@@ -525,8 +744,14 @@ def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings
                     todo.append((path, name))
                 else:
                     rows.append(_finish(bar, failed_report(path, name, out_dir, f"its worker process died on "
-                                                           f"each of {POOL_TRIES} tries (killed, or out of memory)")))
+                                                           f"each of {POOL_TRIES} tries (killed, or out of memory)",
+                                                           run)))
     return rows
+
+
+def _read_report(out_dir: str, name: str) -> dict:
+    with open(os.path.join(out_dir, name + REPORT), encoding="utf-8") as f:
+        return json.load(f)
 
 
 def _finish(bar: Progress, report: dict) -> dict:
@@ -549,7 +774,11 @@ def _row(report: dict, skipped: bool) -> dict:
             "uncertain_segments": len(summary.get("uncertain_segments", [])) if summary else None,
             "marker_rms_mm": hand.get("marker_rms_mm"),
             "seconds": (report.get("seconds") or {}).get("total", 0.0),
-            "page": report.get("name", "") + ".report.html" if "html" in report.get("outputs", {}) else None}
+            "page": report.get("name", "") + ".report.html" if "html" in report.get("outputs", {}) else None,
+            # the take's files in the output folder, its report too: exactly what is on disk for it
+            "outputs": sorted(os.path.join(os.path.dirname(report.get("name") or ""), f)
+                              for f in [*(report.get("outputs") or {}).values(),
+                                        os.path.basename(report.get("name") or "") + REPORT])}
 
 
 def _write_summary(out_dir: str, summary: dict) -> None:

@@ -132,7 +132,10 @@ def run_on_farm(client, todo: list[tuple[str, str]], out_dir: str, settings, tas
 
     Paths are made absolute, so workers must see inputs and ``out_dir`` under the same paths. A take
     whose task failed on every try (its worker died each time, or it raised) yields
-    ``failed(path, name, out_dir, reason)``.
+    ``failed(path, name, out_dir, reason)``. A take's future is released once its report is here, so a
+    worker that dies later costs no finished take a second run (a task that finished as its worker died,
+    before the report came, is run again: :func:`mocap_autolabel.batch.process_take` then finds the
+    take's report of this run and writes nothing).
     """
     from distributed import as_completed
 
@@ -142,9 +145,15 @@ def run_on_farm(client, todo: list[tuple[str, str]], out_dir: str, settings, tas
         fut = client.submit(task, os.path.abspath(path), name, out_dir, settings, retries=TRIES - 1, pure=False,
                             key=f"mocap_autolabel-{name}-{os.urandom(6).hex()}")
         futures[fut] = (path, name)
-    for fut in as_completed(futures):
-        path, name = futures[fut]
+    # Each future is let go as soon as its report is here: a task whose result the client still holds is
+    # run again by the scheduler when the worker that holds it dies (rewriting the take's outputs, and
+    # delaying the rest). as_completed keeps none it has yielded.
+    for fut in as_completed(list(futures)):
+        path, name = futures.pop(fut)
         try:
-            yield fut.result()
+            report = fut.result()
         except Exception as exc:  # KilledWorker (it died on every try) or what the task raised each time
-            yield failed(path, name, out_dir, f"failed on every try on the cluster ({type(exc).__name__}: {exc})")
+            report = failed(path, name, out_dir, f"failed on every try on the cluster ({type(exc).__name__}: {exc})")
+        fut.release()
+        del fut
+        yield report

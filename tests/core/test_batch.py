@@ -166,3 +166,64 @@ def test_two_hands_forced_on_a_one_hand_take_label_the_one_it_holds_and_say_so(t
     forced = run_batch([str(takes / "forced.c3d")], str(tmp_path / "forced"), BatchSettings(hands="2"),
                        progress="none")
     assert forced["ok"] == 1 and "two hands were forced, one was found" in forced["takes_detail"][0]["warning"]
+
+
+def _on_disk(out: Path) -> list[str]:
+    """The files of takes in a batch folder (not its summaries), relative to it."""
+    return sorted(str(p.relative_to(out)) for p in out.rglob("*")
+                  if p.is_file() and p.name not in ("summary.json", "summary.csv", "index.html"))
+
+
+def _listed(summary: dict) -> list[str]:
+    return sorted(f for row in summary["takes_detail"] for f in row["outputs"])
+
+
+def test_resume_knows_a_take_by_its_input_and_the_settings_that_made_it(tmp_path):
+    """Two inputs of one name keep distinct output names across runs; a changed input or changed settings
+    is done again (issue 47: A was skipped as B's take, and --layout glove13 skipped han19's takes)."""
+    a, b = tmp_path / "A" / "take.c3d", tmp_path / "B" / "take.c3d"
+    for seed, path in ((1, a), (2, b)):
+        path.parent.mkdir()
+        write_c3d(synthesize(load_layout("han19"), 200, seed=seed).take, path)
+    out = tmp_path / "out"
+
+    def batch(*paths, **settings):
+        summary = run_batch([str(p) for p in paths], str(out), BatchSettings(**settings), progress="none")
+        names = [r["name"] for r in summary["takes_detail"]]
+        # the reports list exactly the takes' files
+        assert _listed(summary) == [f for f in _on_disk(out) if any(f.startswith(n + ".") for n in names)]
+        return {r["name"]: (r["file"], r["skipped"]) for r in summary["takes_detail"]}
+
+    assert batch(b) == {"take": (str(b), False)}
+    assert batch(a, b) == {"take": (str(b), True), "take-2": (str(a), False)}  # A labeled, under a name of its own
+    assert batch(a) == {"take-2": (str(a), True)}  # A alone keeps its name, and B's outputs are B's
+    assert json.loads((out / "take.report.json").read_text())["file"] == str(b)
+    before = (out / "take-2.labeled.c3d").read_bytes()
+    assert read_take(out / "take-2.labeled.c3d").n_frames == read_take(a).n_frames
+    os.utime(a, ns=(1, 1))  # a touch changes no byte: not done again (its content is hashed)
+    assert batch(a, b) == {"take": (str(b), True), "take-2": (str(a), True)}
+    write_c3d(synthesize(load_layout("han19"), 240, seed=3).take, b)  # B's content changed at its path
+    assert batch(a, b) == {"take": (str(b), False), "take-2": (str(a), True)}
+    assert read_take(out / "take.labeled.c3d").n_frames == 240
+    assert batch(a, b, confident=0.9) == {"take": (str(b), False), "take-2": (str(a), False)}  # new settings
+    assert batch(a, b, confident=0.9, jobs=2, force=False) == {"take": (str(b), True), "take-2": (str(a), True)}
+    # another layout: both done again (refused as glove13 takes, so no outputs are left beside their reports)
+    glove = run_batch([str(a), str(b)], str(out), BatchSettings(layout="glove13"), progress="none")
+    assert (glove["failed"], glove["skipped"]) == (2, 0)
+    assert _on_disk(out) == ["take-2.report.json", "take.report.json"] == _listed(glove)
+    assert (out / "take-2.labeled.c3d").exists() is False and before
+
+
+def test_a_rerun_with_other_output_flags_leaves_exactly_its_outputs(tmp_path, bpy_module):
+    """--fbx, then --html, then neither: each run's take outputs are exactly what it makes, all listed."""
+    _synthetic(tmp_path / "takes", 1, frames=200)
+    out = tmp_path / "out"
+    for flags, files in ((dict(fbx=True), ["synth0.fbx", "synth0.labeled.c3d", "synth0.report.json"]),
+                         (dict(html=True), ["synth0.labeled.c3d", "synth0.report.html", "synth0.report.json"]),
+                         ({}, ["synth0.labeled.c3d", "synth0.report.json"])):
+        summary = run_batch([str(tmp_path / "takes")], str(out), BatchSettings(**flags), progress="none")
+        assert summary["ok"] == 1 and summary["skipped"] == 0, (flags, summary["takes_detail"])
+        assert _on_disk(out) == files == _listed(summary), flags
+        assert (out / "index.html").exists() == bool(flags.get("html"))
+        report = json.loads((out / "synth0.report.json").read_text())
+        assert sorted(report["outputs"].values()) == [f for f in files if not f.endswith(".json")]

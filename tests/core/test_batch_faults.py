@@ -6,13 +6,15 @@ from __future__ import annotations
 import json
 import os
 import resource
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 from conftest import ROOT
-from helpers import run_killing_a_worker, same_outputs
+from helpers import alive, run_killing_a_worker, same_outputs, worker_processes
 from helpers import synthetic_takes as _synthetic
 from mocap_autolabel.batch import BatchSettings, run_batch
 
@@ -82,3 +84,93 @@ def test_a_worker_killed_at_a_random_point_loses_nothing(undisturbed, tmp_path, 
         rerun = run_batch([str(undisturbed / "takes")], str(out), settings, progress="none")
         assert rerun["ok"] == 3
         assert same_outputs(undisturbed / "one", out) == ["synth0", "synth1", "synth2"]
+
+
+def _files(out) -> dict[str, tuple[int, int]]:
+    """Every file in a batch folder (temporary ones too), with its size and mtime."""
+    return {p.name: (p.stat().st_size, p.stat().st_mtime_ns) for p in out.iterdir()}
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_no_worker_outlives_its_batch(tmp_path, sig):
+    """batch --jobs 2 killed while both workers label: they end with it, and nothing is written after
+    (they went on labeling the takes queued to them for seconds, racing a rerun)."""
+    takes = tmp_path / "takes"
+    _synthetic(takes, 4, frames=3000)
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "mocap_autolabel", "batch", str(takes), "-o", str(out),
+                             "--jobs", "2", "--json-progress"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True, env=dict(os.environ, PYTHONPATH=str(ROOT / "addon")))
+    try:
+        for line in proc.stderr:  # the first take done: the workers are on the next ones
+            if json.loads(line)["event"] == "done":
+                break
+        workers = worker_processes(proc.pid)
+        assert len(workers) == 2
+        proc.send_signal(sig)
+        proc.wait(timeout=30)
+    finally:
+        proc.kill()
+        proc.stderr.close()
+    deadline = time.monotonic() + 5
+    while alive(workers) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert not alive(workers), f"workers {alive(workers)} outlived their batch by 5 s"
+    written = _files(out)
+    time.sleep(1.5)
+    assert _files(out) == written  # nothing written after
+    assert (out / "synth0.report.json").exists() and not (out / "summary.json").exists()
+    rerun = run_batch([str(takes)], str(out), BatchSettings(), progress="none")
+    assert (rerun["ok"], rerun["skipped"]) == (4, 1) and not [p for p in out.iterdir() if ".partial" in p.name]
+
+
+KILL_IN_RESULT = '''
+import os, signal, struct
+flag = os.environ.get("MOCAP_TEST_KILL_IN_RESULT")
+if flag:
+    from multiprocessing import connection
+    wrote = []
+    _replace, _send_bytes = os.replace, connection.Connection._send_bytes
+    def replace(src, dst, *args, **kwargs):
+        _replace(src, dst, *args, **kwargs)
+        if str(dst).endswith("synth1.report.json"):
+            wrote.append(True)
+    def send_bytes(self, buf):
+        # The worker that finished synth1 dies handing back its result, as early as the pipe's real writes
+        # allow: after the length of a message over 16 kB (written apart from its body), else after it all.
+        if wrote and b"_ResultItem" in bytes(buf[:200]) and not os.path.exists(flag):
+            open(flag, "w").close()
+            if len(buf) > 16384:
+                self._send(struct.pack("!i", len(buf)))
+            else:
+                _send_bytes(self, buf)
+            os.kill(os.getpid(), signal.SIGKILL)
+        return _send_bytes(self, buf)
+    os.replace, connection.Connection._send_bytes = replace, send_bytes
+'''
+
+
+def test_a_worker_killed_handing_back_a_result_does_not_hang_the_batch(tmp_path):
+    """The flaky hang of the random kills above, made certain: a worker killed in the middle of the message
+    that hands back a take's report (25 kB: two writes) left the pool's manager thread waiting for the rest
+    of it, and the other worker waiting on the pipe's lock, for ever."""
+    takes = tmp_path / "takes"
+    _synthetic(takes, 3, frames=3000)  # synth1's report is the largest
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(KILL_IN_RESULT)
+    flag = tmp_path / "killed"
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(hook), str(ROOT / "addon")]),
+               MOCAP_TEST_KILL_IN_RESULT=str(flag))
+    proc = subprocess.Popen([sys.executable, "-m", "mocap_autolabel", "batch", str(takes), "-o", str(out),
+                             "--jobs", "2", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, start_new_session=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)  # the batch and its workers
+        proc.communicate()
+        pytest.fail("the batch hung after its worker was killed handing back a result")
+    assert flag.exists(), "the worker was not killed"
+    assert proc.returncode == 0 and "3 ok, 0 failed, 0 skipped" in stdout, stdout + stderr

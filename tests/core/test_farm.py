@@ -127,3 +127,45 @@ def test_readme_farm_example_runs_as_written(takes_and_one_job, tmp_path):
     assert done.returncode == 0, done.stdout + done.stderr
     assert "3 ok, 0 failed, 0 skipped" in done.stdout and f"(tcp://127.0.0.1:{port})" in done.stdout
     assert same_outputs(takes_and_one_job / "one", tmp_path / "labeled") == ["synth0", "synth1", "synth2"]
+
+
+@pytest.mark.slow
+def test_a_worker_that_dies_costs_no_finished_take_a_second_run(tmp_path):
+    """A worker killed once three takes are done: the scheduler ran again every take the dead worker had
+    finished (their futures were held to the end), rewriting their outputs. Each finished take's files
+    are the same files (inode and mtime) after the run as when it finished."""
+    import signal
+    import threading
+
+    from helpers import worker_processes
+
+    _synthetic(tmp_path / "takes", 6, frames=3000)
+    out = tmp_path / "out"
+    finished: dict[str, list] = {}
+    stop = threading.Event()
+
+    def ident(path: Path) -> tuple[int, int]:
+        st = path.stat()
+        return st.st_ino, st.st_mtime_ns
+
+    def killer():
+        while len(list(out.glob("*.report.json"))) < 3:
+            if stop.wait(0.01):
+                return
+        for report in out.glob("*.report.json"):
+            name = report.name[: -len(".report.json")]
+            finished[name] = [ident(report), ident(out / f"{name}.labeled.c3d")]
+        os.kill(worker_processes()[0], signal.SIGKILL)
+
+    thread = threading.Thread(target=killer, daemon=True)
+    thread.start()
+    try:
+        summary = run_batch([str(tmp_path / "takes")], str(out), BatchSettings(scheduler="local:2"), progress="none")
+    finally:
+        stop.set()
+        thread.join()
+    assert len(finished) >= 3, "no worker was killed"
+    assert summary["ok"] == 6, summary["takes_detail"]
+    rerun = {name for name, ids in finished.items()
+             if [ident(out / f"{name}.report.json"), ident(out / f"{name}.labeled.c3d")] != ids}
+    assert not rerun, f"finished takes run again: {sorted(rerun)}"
