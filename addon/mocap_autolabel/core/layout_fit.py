@@ -87,6 +87,39 @@ def guess_spots(observed: np.ndarray, labeler_for: Callable[[Layout], object]) -
     return [int(s) for s in spots]
 
 
+#: Rounds of calibration, each but the last followed by :func:`steadiest_bones`.
+ROUNDS = 2
+
+
+def steadiest_bones(observed: np.ndarray, layout: Layout, cal, bones: list[int],
+                    rest: np.ndarray) -> tuple[list[int], np.ndarray]:
+    """Each marker's bone again: the bone in whose rest frame its positions over the calibration's
+    frames stay most still (a marker rides on one bone), and its mean rest position there; the
+    palm wins a tie with a finger's metacarpal. ``rest`` ``(M, 3)`` and ``bones`` are the current."""
+    from .hand.ik import HandSolver
+
+    hand = cal.hand()
+    picked = np.asarray(cal.frames, dtype=int)
+    fit = HandSolver(hand, layout.place(hand)[0].moved(cal.offsets)).solve(observed[picked])
+    ok = fit.solved & np.isfinite(fit.poses).all(axis=1)
+    if ok.sum() < 5:
+        return bones, rest
+    r, t = hand.skinning_transforms(fit.poses[ok])  # (F, 20, 3, 3), (F, 20, 3): rest -> posed
+    p = observed[picked][ok]  # (F, M, 3)
+    local = np.einsum("fbji,fmbj->fmbi", r, p[:, :, None, :] - t[:, None])  # (F, M, 20, 3) in rest space
+    spread = np.nanmean(np.sum((local - np.nanmean(local, axis=0)) ** 2, axis=-1), axis=0)  # (M, 20)
+    spread[:, 0] *= 0.8  # the palm before a metacarpal that moves with it
+    new_bones, new_rest = list(bones), rest.copy()
+    for j in range(len(bones)):
+        if not np.isfinite(spread[j]).any():
+            continue
+        b = int(np.nanargmin(spread[j]))
+        if spread[j, b] < 0.7 * spread[j, bones[j]]:  # clearly steadier
+            new_bones[j] = b
+            new_rest[j] = np.nanmean(local[:, j, b], axis=0)
+    return new_bones, new_rest
+
+
 def _place_on(hand: HandModel, bone: int, p: np.ndarray) -> tuple[float, float, float]:
     """``(along, across, angle_deg)`` of rest position ``p`` (hand frame) on ``bone`` of ``hand``."""
     if bone == 0:
@@ -151,15 +184,23 @@ def fit_layout(observed: np.ndarray, names: list[str], *, name: str = "fitted", 
     spots = guess_spots(observed, labeler_for)
     tick(0.2)
     scan = scan_layout()
-    first = Layout(name, tuple(Marker(n, scan.markers[s].bone, scan.markers[s].along, scan.markers[s].across)
-                               for n, s in zip(names, spots)), description="fitted from a labeled take")
-    cal = calibrate(observed, first, frames=frames, prior=0.00005, progress=lambda s: tick(0.2 + 0.75 * s))
-    hand = cal.hand()
-    rest = first.place(hand)[0].rest + cal.offsets
-    markers = tuple(placed_marker(hand, n, BONE_INDEX[mk.bone], p, mk.radius)
-                    for n, mk, p in zip(names, first.markers, rest))
+    layout = Layout(name, tuple(Marker(n, scan.markers[s].bone, scan.markers[s].along, scan.markers[s].across)
+                                for n, s in zip(names, spots)), description="fitted from a labeled take")
+    for round_ in range(ROUNDS):
+        share = (0.2 + 0.75 * round_ / ROUNDS, 0.75 / ROUNDS)
+        cal = calibrate(observed, layout, frames=frames, prior=0.00005,
+                        progress=lambda s, a=share: tick(a[0] + a[1] * s))
+        hand = cal.hand()
+        rest = layout.place(hand)[0].rest + cal.offsets
+        bones = [BONE_INDEX[mk.bone] for mk in layout.markers]
+        if round_ < ROUNDS - 1:  # the calibration's poses say which bone each marker rides on
+            bones, rest = steadiest_bones(observed, layout, cal, bones, rest)
+        layout = Layout(name, tuple(placed_marker(hand, n, b, p, mk.radius)
+                                    for n, b, mk, p in zip(names, bones, layout.markers, rest)),
+                        description="fitted from a labeled take")
     tick(1.0)
-    layout = Layout(name, markers, first.glove, f"fitted from {source} ({cal.side} hand, "
+    markers = layout.markers
+    layout = Layout(name, markers, layout.glove, f"fitted from {source} ({cal.side} hand, "
                                                 f"{1000 * cal.rms_after:.1f} mm RMS)")
     return LayoutFit(layout, float(cal.rms_after), cal.side, [scan.names[s] for s in spots])
 
