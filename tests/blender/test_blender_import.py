@@ -143,3 +143,27 @@ def test_animio_slotted_and_legacy_paths_agree(empty_scene, bpy_module):
     np.testing.assert_array_equal(frames, [1, 2, 5])
     empty_scene.frame_set(2)
     assert obj.location[1] == pytest.approx(0.25)
+
+
+@pytest.mark.parametrize("offset", [-5000, -300, 1_048_574])
+def test_a_frame_offset_that_puts_frames_outside_the_scene_is_refused(empty_scene, bpy_module, tmp_path, offset):
+    """Issue 47: Blender's scene range holds frames 0 to 1,048,574. At -5,000 the range became 0-0 with every
+    key before it, and Next found nothing; at -300 Next from the start skipped every segment before frame 0."""
+    take = small_take(frames=600, points=3)
+    path = tmp_path / "take.c3d"
+    write_c3d(take, path)
+    scene = empty_scene
+    scene.frame_start, scene.frame_end = 1, 250
+    with pytest.raises(RuntimeError) as info:
+        bpy_module.ops.mocap_autolabel.import_markers(filepath=str(path), frame_offset=offset)
+    first = take.first_frame + offset
+    assert str(info.value).strip().splitlines()[-1] == (
+        f"Error: take.c3d: Frame Offset {offset} puts the take at frames {first} to {first + 599}, outside the "
+        f"frames 0 to 1048574 a Blender scene holds; use a Frame Offset from {-take.first_frame} to "
+        f"{1048574 - take.first_frame - 599}; nothing imported")
+    assert len(bpy_module.data.collections) == 0 and len(bpy_module.data.objects) == 0
+    assert (scene.frame_start, scene.frame_end) == (1, 250)
+    # The lowest offset it names puts the take's first frame on frame 0, the range showing all of it.
+    assert bpy_module.ops.mocap_autolabel.import_markers(filepath=str(path), frame_offset=-take.first_frame) \
+        == {"FINISHED"}
+    assert (scene.frame_start, scene.frame_end, scene.frame_current) == (0, 599, 0)

@@ -184,6 +184,29 @@ def test_previous_and_next_visit_every_uncertain_segment_in_time_order(empty_sce
     assert _walk(bpy, previous=True) == expected[::-1]
 
 
+def test_next_and_previous_walk_the_whole_take_imported_from_frame_0(empty_scene, bpy_module, take_files):
+    """Issue 47: a negative Frame Offset put keys before frame 0, where the scene's range and current frame
+    cannot go, and Next from the start skipped every segment there. The lowest offset import allows puts the
+    take on frame 0: Next from the start and Previous from the end each visit every segment, in time order."""
+    from mocap_autolabel.core.take import read_take
+
+    bpy = bpy_module
+    first = read_take(take_files["syn"]).first_frame
+    assert bpy.ops.mocap_autolabel.import_markers(filepath=str(take_files["syn"]), frame_offset=-first) == {"FINISHED"}
+    coll = bpy.context.scene.mocap_autolabel.take
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    lab = state(coll).labeling
+    scene = bpy.context.scene
+    unsure = uncertain_segments(lab, scene.mocap_autolabel.sure)
+    order = unsure[np.lexsort((lab.slot[unsure], lab.start[unsure]))]
+    expected = [(int(lab.start[s]), int(lab.label[s])) for s in order]  # sample 0 is frame 0
+    assert (scene.frame_start, scene.frame_end) == (0, lab.n_frames - 1) and expected[0][0] == 0
+    scene.frame_set(scene.frame_start)
+    assert _walk(bpy, previous=False) == expected
+    scene.frame_set(scene.frame_end)
+    assert _walk(bpy, previous=True) == expected[::-1]
+
+
 # --- bug 6: Confident at refreshes the list, the counts, the walk and the key colours ----------
 
 def test_confident_at_refreshes_list_counts_and_key_colours(labeled):

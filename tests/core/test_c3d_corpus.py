@@ -167,3 +167,49 @@ def test_an_integer_files_scale_that_disagrees_is_read_with_point_scale_as_ezc3d
         ref = ezc3d.c3d(str(patched))["data"]["points"][:3].transpose(2, 1, 0) / 1000.0  # mm
     valid = ~np.isnan(take.positions)
     assert np.abs(take.positions[valid] - ref[valid]).max() < 1e-6
+
+
+# Intel REAL, 41 points x 140 frames, ANALOG:USED 0, data at block 5 (OptiTrack Motive, no analog data).
+NO_ANALOG = "kineticstoolkit/data/kinematics/sample_probing_acromion_R.c3d"
+
+
+def _optotrak_header(src, dst):
+    """``src`` with the header of issue 47's Optotrak export (not in the corpus): a first/last frame range of
+    1,149 frames and analog words per frame that the data section does not hold (its parameters say 0)."""
+    data = bytearray(src.read_bytes())
+    first = struct.unpack_from("<H", data, 6)[0]
+    struct.pack_into("<H", data, 8, first + 1148)  # last frame: 1,149 frames
+    struct.pack_into("<H", data, 4, 16)  # analog words per frame
+    struct.pack_into("<H", data, 18, 1)  # analog samples per frame
+    dst.write_bytes(bytes(data))
+    return dst
+
+
+def test_header_analog_words_and_frames_the_data_does_not_hold_are_read_as_ezc3d_does(tmp_path):
+    """Issue 47: the header states 1,149 frames and analog words per frame, POINT:FRAMES and ANALOG:USED (0)
+    agree with the data section; it was refused as truncated, ezc3d reads POINT:FRAMES frames of points only."""
+    ezc3d = pytest.importorskip("ezc3d")
+    src = data_path("c3d", NO_ANALOG)
+    patched = _optotrak_header(src, tmp_path / "optotrak.c3d")
+    original, take = read_c3d(src), read_c3d(patched)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = ezc3d.c3d(str(patched))["data"]["points"][:3].transpose(2, 1, 0)  # file units
+    ref = ref * (1e-3 if take.source_units == "mm" else 1.0)
+    assert take.n_frames == ref.shape[0] == 140 and take.n_points == ref.shape[1] == 41
+    np.testing.assert_array_equal(take.positions, original.positions)
+    valid = ~np.isnan(take.positions)
+    assert np.abs(take.positions[valid] - ref[valid]).max() < 1e-6
+    assert [w for w in take.warnings if w not in original.warnings] == [
+        "analog words per frame disagrees: 16 in the header, 0 in ANALOG:USED x ANALOG:RATE/POINT:RATE; read 0 "
+        "analog words per frame, which the data section's size supports",
+        "frame count disagrees: 1149 in the header's first/last frame, 140 in POINT:FRAMES; read 140 frames, "
+        "which the data section's size supports"]
+
+
+def test_the_same_header_over_a_cut_data_section_is_still_refused_in_one_line(tmp_path):
+    patched = _optotrak_header(data_path("c3d", NO_ANALOG), tmp_path / "optotrak.c3d")
+    patched.write_bytes(patched.read_bytes()[:-3000])
+    with pytest.raises(MocapInputError, match="file is truncated: the header declares 1149 frames") as info:
+        read_c3d(patched)
+    assert "\n" not in str(info.value)

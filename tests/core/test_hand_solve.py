@@ -181,3 +181,30 @@ def test_pinch_contacts_settle_what_the_markers_leave_open(pinched):
     err_plain = np.linalg.norm(plain.offsets - pinched.offsets, axis=1)
     err_touched = np.linalg.norm(pinched.touched.offsets - pinched.offsets, axis=1)
     assert err_touched.max() < 0.5 * err_plain.max()
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_batch_and_solve_of_a_take_with_gaps_print_no_numpy_warnings(tmp_path, capsys):
+    """Issue 47: `batch --solve-hand` and `solve` printed numpy's "Mean of empty slice" for a marker that no
+    solved frame saw (the per-marker RMS of the report). Labeled, then solved, as a warning it fails the run."""
+    from mocap_autolabel.cli import main
+    from mocap_autolabel.core.formats.c3d import write_c3d
+    from mocap_autolabel.core.synth.generate import synthesize
+
+    synth = synthesize(HAN19, 300, seed=2)
+    take = synth.take
+    gone = HAN19.names.index("PinkyTip")
+    take.positions[synth.labels == gone] = np.nan  # never seen: no solved frame has its residual
+    take.positions[100:200, 5:9] = np.nan  # and a long gap in a few more slots
+    src = tmp_path / "gaps.c3d"
+    write_c3d(take, src)
+    out = tmp_path / "out"
+    assert main(["batch", str(src), "-o", str(out), "--solve-hand", "--jobs", "1", "--quiet"]) == 0
+    report = json.loads((out / "gaps.report.json").read_text())
+    assert report["status"] == "ok", report
+    assert report["hand"]["per_marker_rms_mm"]["PinkyTip"] is None
+    assert all(v > 0 for n, v in report["hand"]["per_marker_rms_mm"].items() if n != "PinkyTip")
+    solved = tmp_path / "solve.json"
+    assert main(["solve", str(out / "gaps.labeled.c3d"), "--report", str(solved), "--quiet"]) == 0
+    assert json.loads(solved.read_text())["per_marker_rms_mm"]["PinkyTip"] is None
+    assert "RuntimeWarning" not in capsys.readouterr().err

@@ -75,6 +75,30 @@ def check_options(options: ImportOptions) -> None:
         raise MocapInputError(None, f"Scale must be above 0 (got {options.scale:g}); nothing imported")
 
 
+def blender_frames() -> tuple[int, int]:
+    """The first and last frame a Blender scene's frame range can hold (0 and 1,048,574)."""
+    prop = bpy.types.Scene.bl_rna.properties["frame_start"]
+    return int(prop.hard_min), int(prop.hard_max)
+
+
+def check_frames(take: Take, options: ImportOptions, label: str = "") -> None:
+    """Raise :class:`MocapInputError` when the Frame Offset puts any of the take's frames outside the frames
+    a scene's range can hold. Blender clamps the range (and, unless negative frames are allowed in the
+    Preferences, the current frame) to 0 and up: keys before frame 0 would lie outside the timeline, and
+    Previous / Next, which walk from the current frame, would skip every segment there."""
+    from ..core.errors import MocapInputError
+
+    lowest, highest = blender_frames()
+    offset, file_first = int(options.frame_offset), int(take.first_frame)
+    first = file_first + offset
+    last = first + take.n_frames - 1
+    if first < lowest or last > highest:
+        raise MocapInputError(label or take.source or "take",
+                              f"Frame Offset {offset} puts the take at frames {first} to {last}, outside the "
+                              f"frames {lowest} to {highest} a Blender scene holds; use a Frame Offset from "
+                              f"{lowest - file_first} to {highest - file_first - take.n_frames + 1}; nothing imported")
+
+
 def check_importable(take: Take, options: ImportOptions, label: str = "") -> np.ndarray:
     """The slots to import; raises :class:`MocapInputError` when there is nothing to import, so that
     nothing is created and the scene's rate and range stay as they were (an analog-only C3D, such as
@@ -87,6 +111,7 @@ def check_importable(take: Take, options: ImportOptions, label: str = "") -> np.
         raise MocapInputError(label, "the file holds no marker points (analog data only?); nothing imported")
     if take.n_frames == 0:
         raise MocapInputError(label, "the file holds no frames (no data rows or samples); nothing imported")
+    check_frames(take, options, label)
     slots = selected_points(take, options.name_filter)
     if not len(slots):
         raise MocapInputError(label, f"no point matches the Point Names pattern {options.name_filter!r} "

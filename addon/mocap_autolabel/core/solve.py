@@ -49,8 +49,7 @@ class HandSolve:
         fit = self.fit
         rms = fit.rms * 1000
         gate = np.isfinite(rms) & (rms > GATE * 1000)
-        with np.errstate(invalid="ignore"):
-            per_marker = np.sqrt(np.nanmean(np.where(fit.solved[:, None], fit.residuals, np.nan) ** 2, axis=0)) * 1000
+        per_marker = _per_marker_rms(fit) * 1000
         return {
             "layout": self.layout.name,
             "frames": len(rms),
@@ -64,6 +63,18 @@ class HandSolve:
             "calibration": self.calibration.to_dict(),
             "seconds": self.seconds,
         }
+
+
+def _per_marker_rms(fit: Fit) -> np.ndarray:
+    """``(M,)`` RMS residual of each marker over the solved frames that saw it, metres; NaN for a marker
+    no solved frame saw. Sums and counts, not nanmean: a marker missing from the whole take (or from
+    every solved frame) would make numpy warn "Mean of empty slice" on the console."""
+    seen = fit.solved[:, None] & np.isfinite(fit.residuals)
+    count = seen.sum(axis=0)
+    total = np.where(seen, fit.residuals, 0.0) ** 2
+    out = np.full(count.shape, np.nan)
+    np.divide(total.sum(axis=0), count, out=out, where=count > 0)
+    return np.sqrt(out)
 
 
 #: The share of a solve's time its calibration takes (measured on the demo and glove takes: 75-80 %).

@@ -24,7 +24,11 @@ class MOCAPAL_OT_import_markers(bpy.types.Operator, ImportHelper):
     # No hard minimum: Blender would clamp 0 or -1 to it silently; execute refuses a Scale of 0 or below.
     scale: FloatProperty(name="Scale", description="Factor applied to positions (metres) on import",
                          default=1.0, soft_min=0.001, soft_max=100.0)
-    frame_offset: IntProperty(name="Frame Offset", description="Added to the file's frame numbers",
+    # No minimum either: the lowest offset depends on the file's first frame; execute refuses one that puts
+    # frames before 0, where Blender's scene range cannot go.
+    frame_offset: IntProperty(name="Frame Offset",
+                              description="Added to the file's frame numbers; the take must stay on frame 0 or "
+                                          "later, where Blender's scene range starts",
                               default=0)
     name_filter: StringProperty(name="Point Names", default="*",
                                 description="Import only points whose name matches this pattern "

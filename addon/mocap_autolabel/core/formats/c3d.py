@@ -315,10 +315,11 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
 
     The header and the parameters can disagree on the point count (POINT:USED), the sample
     format (the sign of POINT:SCALE), the data start (POINT:DATA_START) and the frame count
-    (POINT:FRAMES, TRIAL:ACTUAL_START/END_FIELD). Every combination of the stated values is
-    checked against the size of the data section (see :func:`_fit`); among equals the header's
-    values win, as they define the layout of a standard file. Only when no combination fits in
-    the file is it refused (truncated). The analog words per frame are the header's alone.
+    (POINT:FRAMES, TRIAL:ACTUAL_START/END_FIELD) and the analog words per frame (ANALOG:USED
+    times ANALOG:RATE / POINT:RATE). Every combination of the stated values is checked against
+    the size of the data section (see :func:`_fit`); among equals the header's values win, as
+    they define the layout of a standard file. Only when no combination fits in the file is it
+    refused (truncated).
     """
     header = reader.header
     processor = {"INTEL": "Intel", "DEC": "DEC", "MIPS": "MIPS"}.get(reader._dtypes.proc_type, "Intel")
@@ -343,10 +344,14 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
     if max(trial_frames, int(long_frames) if long_frames is not None and np.isfinite(long_frames) else 0) \
             > MAX_SHORT_FRAMES:  # a long take: the 16-bit counts are only capped, no disagreement
         frames = [(n, who) for n, who in frames if n > MAX_SHORT_FRAMES] or frames
-    analog_words = int(header.analog_count)
+    # An exporter (an Optotrak one) can state analog words in the header that its data section does not
+    # hold (ANALOG:USED 0): ezc3d sizes a frame from the parameters; both are tried against the data.
+    analogs = _stated(("the header", int(header.analog_count)), ("ANALOG:USED x ANALOG:RATE/POINT:RATE",
+                                                                 _analog_words(reader)))
 
     best, first = None, None
-    for (n_points, _), (is_real, _), (start, _) in itertools.product(points or [(0, "")], formats, starts):
+    for (n_points, _), (is_real, _), (start, _), (analog_words, _) in itertools.product(
+            points or [(0, "")], formats, starts, analogs):
         word = 4 if is_real else 2
         frame_bytes = (4 * n_points + analog_words) * word
         space = file_size - (start - 1) * BLOCK
@@ -355,11 +360,11 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
             rank = _fit(space, n_frames, frame_bytes)
             # Among layouts that leave data unread, the one that reads the most.
             key = (rank, space - n_frames * frame_bytes if rank == 2 else 0)
-            choice = (key, n_points, is_real, start, n_frames, available)
+            choice = (key, n_points, is_real, start, analog_words, n_frames, available)
             first = first or choice
             if best is None or key < best[0]:
                 best = choice
-    (rank, _), n_points, is_real, start, n_frames, available = best
+    (rank, _), n_points, is_real, start, analog_words, n_frames, available = best
     capped = ""
     frame_bytes = (4 * n_points + analog_words) * (4 if is_real else 2)
     if rank == 2 and n_frames == MAX_SHORT_FRAMES and frame_bytes:
@@ -371,14 +376,15 @@ def _layout(path: str, reader, file_size: int) -> tuple[_Layout, list[str]]:
                   f"section holds")
         n_frames = available
     if rank == 3:
-        _, n_points, is_real, start, n_frames, available = first
+        _, n_points, is_real, start, analog_words, n_frames, available = first
         raise MocapInputError(
             path, f"file is truncated: the header declares {n_frames} frames but the data "
-            f"section holds only {available}" + _disagreement_note(points, formats, starts, frames))
+            f"section holds only {available}" + _disagreement_note(points, formats, starts, analogs, frames))
     scale = abs(usable[0]) if usable else 1.0
     notes = [_resolved("point count", points, n_points, f"{n_points} points"),
              _resolved("sample format", formats, is_real, "REAL (float)" if is_real else "INT (16-bit)"),
              _resolved("data start", starts, start, f"block {start}"),
+             _resolved("analog words per frame", analogs, analog_words, f"{analog_words} analog words per frame"),
              _resolved("frame count", frames, n_frames, f"{n_frames} frames"), capped]
     if not is_real and len(usable) == 2 and not np.isclose(abs(usable[0]), abs(usable[1]), rtol=1e-4):
         notes.append(f"POINT:SCALE ({abs(usable[0]):g}) and the header's scale ({abs(usable[1]):g}) "
@@ -448,6 +454,26 @@ def _claim(what: str, value: int) -> str:
 def _disagreement_note(*stated: list[tuple[int, str]]) -> str:
     parts = [", ".join(f"{who} {value}" for value, who in s) for s in stated if len(s) > 1]
     return f" (and none of the stated layouts fits: {'; '.join(parts)})" if parts else ""
+
+
+def _analog_words(reader) -> int | None:
+    """Analog words per frame as the parameters state them (ANALOG:USED channels, each sampled
+    ANALOG:RATE / POINT:RATE times a frame, as ezc3d reads them); None where they do not say."""
+    used = _number_param(reader, "ANALOG:USED")
+    if used is None or not np.isfinite(used) or used < 0:
+        return None
+    if used == 0:
+        return 0  # no channel: no analog word, whatever the rates
+    analog_rate = _number_param(reader, "ANALOG:RATE")
+    point_rate = _number_param(reader, "POINT:RATE") or float(reader.header.frame_rate)
+    if not analog_rate or not point_rate or not np.isfinite(analog_rate / point_rate):
+        return None
+    per_frame = analog_rate / point_rate
+    # A count or rate ratio that is not whole (or not positive) states no layout; rates stored as rounded
+    # floats are allowed 0.1 %.
+    if used != int(used) or per_frame <= 0 or abs(per_frame - round(per_frame)) > 1e-3 * per_frame:
+        return None
+    return int(used) * int(round(per_frame))
 
 
 def _trial_frames(reader) -> int:
