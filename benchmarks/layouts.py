@@ -196,8 +196,8 @@ def pct(rows: np.ndarray, hit: int, count: int) -> str:
     if not len(rows) or rows[:, count].sum() == 0:
         return "-"
     share = rows[:, hit].sum() / rows[:, count].sum()
-    se = clustered_se(rows[:, hit], rows[:, count]) if len(rows) > 1 else 0.0
-    return f"{100 * share:.2f} ± {100 * se:.2f}"
+    se = clustered_se(rows[:, hit], rows[:, count])  # percentage points already; NaN for one take
+    return f"{100 * share:.2f}" + ("" if np.isnan(se) else f" ± {se:.2f}")
 
 
 def main() -> int:

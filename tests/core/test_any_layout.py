@@ -125,3 +125,46 @@ def test_a_layout_is_fitted_from_few_to_many_markers_only():
     with pytest.raises(MocapInputError, match="from 3 to 25 labeled markers"):
         fit_layout(np.zeros((20, 2, 3)), ["a", "b"])
     assert len(scan_layout()) == 25
+
+
+def test_a_random_layout_labels_on_a_small_synthetic_take_with_no_model_of_its_own():
+    layout = random_layout(np.random.default_rng(101), "studio")  # 8 markers, 2 on the back of the hand
+    synth = synthesize(layout, 600, seed=101)
+    labeling = label_take(synth.take, layout)
+    right = score_labeling(labeling.per_sample(), synth.labels, synth.take.valid, len(layout)).as_dict()
+    assert right["accuracy"] > 0.95  # 98.5 % with the shipped set_any (see benchmarks/reports/layouts.md)
+    assert labeling.info["layout"] == "studio" and labeling.names == layout.names
+
+
+@pytest.mark.slow
+def test_a_layout_fitted_from_a_labeled_take_puts_each_marker_near_its_place():
+    truth = random_layout(np.random.default_rng(5), "truth")  # 20 markers
+    synth = synthesize(truth, 600, seed=5)
+    observed = synth.markers + np.random.default_rng(1).normal(0, 0.0005, synth.markers.shape)
+    fit = fit_layout(observed, truth.names, name="fitted")
+    assert fit.layout.names == truth.names and fit.rms < 0.002
+    assert sum(a.bone == b.bone for a, b in zip(truth.markers, fit.layout.markers)) >= 0.9 * len(truth)
+    err = np.linalg.norm(truth.place(synth.hand)[0].rest - fit.layout.place(synth.hand)[0].rest, axis=1)
+    assert np.median(err) < 0.005
+
+
+@pytest.mark.slow
+def test_the_layout_command_writes_a_layout_from_a_labeled_take_and_refuses_a_raw_one(tmp_path, capsys):
+    from mocap_autolabel.core.formats.c3d import write_c3d
+
+    layout = load_layout("tips10_hand3")
+    synth = synthesize(layout, 400, seed=11)
+    labeled = Take(positions=synth.markers, names=[f"L_{n}" for n in layout.names], rate=120.0, source="rom.c3d")
+    write_c3d(labeled, tmp_path / "rom.c3d")
+    out = tmp_path / "my set.toml"
+    assert main(["layout", "--from", str(tmp_path / "rom.c3d"), "--side", "left", "-o", str(out), "--quiet"]) == 0
+    said = capsys.readouterr().out
+    assert f"wrote {out}: 13 markers" in said and "IndexTip" in said
+    fitted = load_layout(out)
+    assert fitted.names == layout.names and fitted.name == "my set"
+    assert main(["layout", "--from", str(tmp_path / "rom.c3d"), "-o", str(tmp_path / "x.txt")]) == 2
+    assert "-o must name a .toml file" in capsys.readouterr().err
+    write_c3d(synth.take, tmp_path / "raw.c3d")
+    assert main(["layout", "--from", str(tmp_path / "raw.c3d"), "-o", str(tmp_path / "raw.toml")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "no labeled point" in err and not (tmp_path / "raw.toml").exists()

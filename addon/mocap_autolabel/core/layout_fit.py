@@ -70,9 +70,56 @@ def _scan_frames(observed: np.ndarray, count: int) -> np.ndarray:
     return ok[np.linspace(0, len(ok) - 1, min(count, len(ok))).astype(int)] if len(ok) else ok
 
 
-def guess_spots(observed: np.ndarray, labeler_for: Callable[[Layout], object]) -> list[int]:
+#: Words of marker names that say which digit a marker is on (studios name their markers so).
+_DIGIT_WORDS = (("thumb", r"thumb|thb|pollex"), ("index", r"index|ind|fore"), ("middle", r"middle|mid"),
+                ("ring", r"ring|rng"), ("little", r"pinky|pinkie|little|lit|small|pink"))
+#: Words that say which segment, and the scan spots' bone endings they allow.
+_SEGMENT_WORDS = ((r"tip|nail|dist|dip", ("_dist",)), (r"pip", ("_mid",)), (r"mcp|prox", ("_prox",)),
+                  (r"cmc|meta|knuckle", ("_meta",)), (r"middle|mid", ("_prox", "_mid")))
+#: Words of markers on the back of the hand or the wrist.
+_HAND_WORDS = r"hand|back|palm|wrist|wr[ab]?|fin$|rfin|lfin|dorsum"
+
+
+def name_spots(name: str, scan: Layout) -> np.ndarray | None:
+    """bool ``(S,)``: the :func:`scan_layout` spots a marker's name allows (``IndexTip``: the index's
+    distal phalanx; ``thumb_middle``: the thumb's proximal or middle segment; ``HandTop``, ``WRA``: the
+    back of the hand, the wrist or a knuckle), or None where the name says nothing."""
+    text = re.sub(r"([a-z])([A-Z])|([A-Z])([A-Z][a-z])", r"\1\3 \2\4", name.rsplit(":", 1)[-1]).lower()
+    words = re.findall(r"[a-z]+", text)
+    digit, rest = None, list(words)
+    for i, w in enumerate(words):
+        for d, pattern in _DIGIT_WORDS:
+            if re.fullmatch(pattern, w):
+                digit, rest = d, words[:i] + words[i + 1:]
+                break
+        if digit:
+            break
+    endings = None
+    for w in rest:
+        for pattern, ends in _SEGMENT_WORDS:
+            if re.fullmatch(pattern, w):
+                endings = ends
+                break
+        if endings:
+            break
+    bones = [m.bone for m in scan.markers]
+    if digit is None and endings is None:
+        if any(re.fullmatch(_HAND_WORDS, w) for w in words):
+            return np.array([b == "palm" or b.endswith("_meta") for b in bones])
+        return None
+    allowed = np.ones(len(bones), dtype=bool)
+    if digit:
+        allowed &= np.array([b.startswith(digit + "_") for b in bones])
+    if endings:
+        allowed &= np.array([b.endswith(endings) for b in bones])
+    return allowed if allowed.any() else None
+
+
+def guess_spots(observed: np.ndarray, labeler_for: Callable[[Layout], object],
+                names: list[str] | None = None) -> list[int]:
     """The :func:`scan_layout` spot of each marker ``(F, M, 3)``: the assignment of most summed log
-    probability over the scanned frames; ``labeler_for(layout)`` makes the layout's labeler."""
+    probability over the scanned frames, among the spots each marker's name allows
+    (:func:`name_spots`); ``labeler_for(layout)`` makes the layout's labeler."""
     scan = scan_layout()
     frames = _scan_frames(observed, SCAN_FRAMES)
     points = observed[frames].astype(np.float32)
@@ -81,6 +128,10 @@ def guess_spots(observed: np.ndarray, labeler_for: Callable[[Layout], object]) -
     scores = labeler_for(scan).scores(points, mask)  # (n, M, S + 1), log domain
     total = np.where(mask[..., None], scores[..., :len(scan)], 0.0).sum(axis=0)
     total /= np.maximum(mask.sum(axis=0), 1)[:, None]  # mean over the frames each marker is seen in
+    for j, name in enumerate(names or []):
+        allowed = name_spots(name, scan)
+        if allowed is not None:
+            total[j, ~allowed] -= 1e6
     rows, cols = linear_sum_assignment(-total)
     spots = np.empty(observed.shape[1], dtype=int)
     spots[rows] = cols
@@ -181,19 +232,23 @@ def fit_layout(observed: np.ndarray, names: list[str], *, name: str = "fitted", 
         def labeler_for(layout: Layout):
             return make_labeler("set", layout)
 
-    spots = guess_spots(observed, labeler_for)
+    spots = guess_spots(observed, labeler_for, names)
     tick(0.2)
     scan = scan_layout()
     layout = Layout(name, tuple(Marker(n, scan.markers[s].bone, scan.markers[s].along, scan.markers[s].across)
                                 for n, s in zip(names, spots)), description="fitted from a labeled take")
     for round_ in range(ROUNDS):
         share = (0.2 + 0.75 * round_ / ROUNDS, 0.75 / ROUNDS)
-        cal = calibrate(observed, layout, frames=frames, prior=0.00005,
-                        progress=lambda s, a=share: tick(a[0] + a[1] * s))
+        last = round_ == ROUNDS - 1
+        try:  # the hand's size only once the markers sit on their bones: a marker on the wrong one drags it
+            cal = calibrate(observed, layout, frames=frames, prior=0.00005, solve_size=last,
+                            progress=lambda s, a=share: tick(a[0] + a[1] * s))
+        except ValueError:  # an implausible size: the average hand's
+            cal = calibrate(observed, layout, frames=frames, prior=0.00005, solve_size=False)
         hand = cal.hand()
         rest = layout.place(hand)[0].rest + cal.offsets
         bones = [BONE_INDEX[mk.bone] for mk in layout.markers]
-        if round_ < ROUNDS - 1:  # the calibration's poses say which bone each marker rides on
+        if not last:  # the calibration's poses say which bone each marker rides on
             bones, rest = steadiest_bones(observed, layout, cal, bones, rest)
         layout = Layout(name, tuple(placed_marker(hand, n, b, p, mk.radius)
                                     for n, b, mk, p in zip(names, bones, layout.markers, rest)),
