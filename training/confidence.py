@@ -252,7 +252,8 @@ def grid_keys(tried: dict) -> dict:
 def shipped_layouts() -> list[str]:
     """The layouts that have a shipped ``set`` model (the calibrations follow the models)."""
     return sorted(f[len("set_"):-len(".onnx")] for f in os.listdir(MODELS_DIR)
-                  if f.startswith("set_") and f.endswith(".onnx"))
+                  if f.startswith("set_") and f.endswith(".onnx")
+                  and not load_card(os.path.join(MODELS_DIR, f))["input"].get("layout_conditioned"))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -64,13 +64,16 @@ def _dustbin_problem(scores: torch.Tensor, obs_null: torch.Tensor, label_null: t
     b, k, m = scores.shape
     valid = mask > 0.5
     n = mask.sum(dim=1)  # (B,)
-    norm = -torch.log(n + m)  # (B,)
+    # M as a tensor, not a Python number: an exported graph must not bake the label count in (set_any
+    # labels layouts of any size with one graph).
+    labels = torch.ones_like(label_null).sum(dim=1)  # (B,) = M
+    norm = -torch.log(n + labels)  # (B,)
     top = torch.cat([scores, obs_null[:, :, None]], dim=2)
     top = torch.where(valid[:, :, None], top, torch.full_like(top, NEG))
     corner = torch.zeros_like(label_null[:, :1])
     bottom = torch.cat([label_null, corner], dim=1)[:, None, :]
     z = torch.cat([top, bottom], dim=1)  # (B, K+1, M+1)
     log_mu = torch.cat([torch.where(valid, norm[:, None].expand(b, k), torch.full_like(mask, NEG)),
-                        (torch.log(torch.full_like(n, float(m))) + norm)[:, None]], dim=1)
+                        (torch.log(labels) + norm)[:, None]], dim=1)
     log_nu = torch.cat([norm[:, None].expand(b, m), (torch.log(n) + norm)[:, None]], dim=1)
     return z, log_mu, log_nu, norm

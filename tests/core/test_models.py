@@ -159,6 +159,29 @@ def test_onnxruntime_agrees_with_torch(method, model, tmp_path):
     np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-4)
 
 
+def test_the_layout_conditioned_model_runs_in_onnxruntime_as_in_torch_for_any_layout(tmp_path):
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch==2.13.0)")
+    pytest.importorskip("onnx", reason="onnx is not installed")
+    from training.any_layout import AnyRecipe, build, export_any, feeds
+    from training.models import ObservationScores
+
+    torch.manual_seed(0)
+    recipe = AnyRecipe(model={"dim": 32, "hidden": 64, "layers": 2, "queries": 1, "label_layers": 1})
+    net = build(recipe).eval()
+    path = tmp_path / "set_any.onnx"
+    export_any(net, recipe, {"null_offset": 0.0}, str(path))
+    for name in ("tips3", "tips5_hand3", "han19"):  # one graph, label sets of any size
+        layout = load_layout(name)
+        fr = sample_frames(layout, 32, np.random.default_rng(1))
+        with torch.no_grad():
+            expected = ObservationScores(net)(*feeds(fr, layout)).numpy()
+        got = OnnxLabeler(path, layout).scores(fr.points, fr.mask)  # the labeler feeds the layout's descriptors
+        assert got.shape == (32, fr.points.shape[1], len(layout) + 1)
+        np.testing.assert_allclose(got[fr.mask], expected[fr.mask], rtol=1e-4, atol=1e-4)
+    with pytest.raises(MocapInputError, match="labels any layout: name the layout"):
+        OnnxLabeler(path)
+
+
 def test_scaling_sinkhorn_matches_the_log_domain_one():
     """The exported graphs run Sinkhorn in matrix-scaling form; it must equal the log-domain form
     that training differentiates, also for the wide score ranges of trained models and padding."""
