@@ -12,7 +12,6 @@ import hashlib
 import json
 import math
 import os
-import platform
 import sys
 import time
 import warnings
@@ -29,8 +28,9 @@ from mocap_autolabel.core.metrics import score_labeling
 from mocap_autolabel.core.synth.frames import FrameConfig, LabeledFrames, sample_frames
 from mocap_autolabel.core.synth.layouts import HELD_OUT, random_layout
 
+from .inputs import matching_loss
 from .models import AnyLayoutLabeler, ObservationScores
-from .train import NULL_OFFSETS, _batches, _progress, calibration, write_card
+from .train import NULL_OFFSETS, _batches, _progress, card_tail, write_card
 
 #: Steps between checkpoints.
 CHECKPOINT_STEPS = 100
@@ -98,18 +98,7 @@ def feeds(frames: LabeledFrames, layout: Layout) -> tuple[torch.Tensor, ...]:
 def loss(net: torch.nn.Module, frames: LabeledFrames, layout: Layout) -> torch.Tensor:
     """Negative log-likelihood of the true matching under the Sinkhorn couplings (with dustbins)."""
     inputs = feeds(frames, layout)
-    mask = inputs[1]
-    out = net(*inputs)  # (B, K+1, M+1)
-    labels = torch.from_numpy(frames.labels.astype(np.int64))
-    m, k = len(layout), labels.shape[1]
-    target = torch.where(labels >= 0, labels, torch.full_like(labels, m))
-    obs = out[:, :k].gather(2, target[..., None])[..., 0]
-    obs_loss = -(obs * mask).sum() / mask.sum()
-    present = torch.zeros(labels.shape[0], m + 1)
-    present.scatter_(1, torch.where(mask > 0.5, target, torch.full_like(target, m)), 1.0)
-    missing = 1.0 - present[:, :m]
-    occ_loss = -(out[:, k, :m] * missing).sum() / missing.sum().clamp(min=1.0)
-    return obs_loss + occ_loss
+    return matching_loss(net(*inputs), frames.labels, inputs[1], len(layout))
 
 
 def build(recipe: AnyRecipe) -> AnyLayoutLabeler:
@@ -251,15 +240,8 @@ def export_any(net: torch.nn.Module, recipe: AnyRecipe, metrics: dict, path: str
                   "layout": {"shape": ["M", DESCRIPTOR_SIZE], "dtype": "float32",
                              "meaning": "each label's marker on the template hand, from "
                                         "core.layout.marker_descriptors"}},
-        "output": {"name": "scores", "shape": ["frames", "K", "M + 1"],
-                   "meaning": "log-domain scores of each observation against the M labels and null (last column)"},
-        "training": {"recipe": asdict(recipe), "held_out": HELD_OUT,
-                     "data": "synthetic frames of random layouts only (mocap_autolabel.core.synth.layouts)",
-                     "frames_seen": recipe.steps * recipe.batch, "torch": torch.__version__,
-                     "machine": f"{platform.machine()} {os.cpu_count()} cores"},
-        "calibration": calibration(metrics.get("null_offset", 0.0)),
-        "metrics": metrics,
-        "sha256": digest,
+        **card_tail(recipe, metrics, digest, "synthetic frames of random layouts only "
+                                             "(mocap_autolabel.core.synth.layouts)", held_out=HELD_OUT),
     }
     write_card(path, card)
     return card

@@ -179,14 +179,21 @@ def export(net: torch.nn.Module, layout: Layout, recipe: Recipe, metrics: dict, 
         "method": recipe.method,
         "layout": {"name": layout.name, "labels": layout.names},
         "input": method.card["input"],
+        **card_tail(recipe, metrics, digest, "synthetic frames only (mocap_autolabel.core.synth.frames)"),
+    }
+    write_card(path, card)
+    return card
+
+
+def card_tail(recipe, metrics: dict, digest: str, data: str, **training) -> dict:
+    """The entries every model card ends with: output, training (recipe, data, frames seen, versions,
+    machine, and ``training``'s extra entries), calibration, metrics and the model's checksum."""
+    return {
         "output": {"name": "scores", "shape": ["frames", "K", "M + 1"],
                    "meaning": "log-domain scores of each observation against the M labels and null (last column)"},
-        "training": {"recipe": asdict(recipe), "data": "synthetic frames only (mocap_autolabel.core.synth.frames)",
-                     "frames_seen": recipe.steps * recipe.batch, "torch": torch.__version__,
-                     "machine": f"{platform.machine()} {os.cpu_count()} cores"},
+        "training": {"recipe": asdict(recipe), **training, "data": data, "frames_seen": recipe.steps * recipe.batch,
+                     "torch": torch.__version__, "machine": f"{platform.machine()} {os.cpu_count()} cores"},
         "calibration": calibration(metrics.get("null_offset", 0.0)),
         "metrics": metrics,
         "sha256": digest,
     }
-    write_card(path, card)
-    return card

@@ -49,9 +49,12 @@ def test_batch_pages_in_a_headless_browser(tmp_path):
     _synthetic(takes, 2, frames=300)
     (takes / "noise.c3d").write_bytes(b"not a take" * 50)
     out = tmp_path / "out"
-    # the hand solved on one take (its calibration takes most of the time), then the folder: synth0 is skipped
+    # one take, then the folder with the same settings: synth0 is skipped (resume knows it by its input
+    # and settings), the others are done
     assert main(["batch", str(takes / "synth0.c3d"), "-o", str(out), "--html", "--solve-hand", "--quiet"]) == 0
-    assert main(["batch", str(takes), "-o", str(out), "--html", "--quiet"]) == 1  # noise fails
+    assert main(["batch", str(takes), "-o", str(out), "--html", "--solve-hand", "--quiet"]) == 1  # noise fails
+    rows = {r["name"]: r for r in json.loads((out / "summary.json").read_text())["takes_detail"]}
+    assert rows["synth0"]["skipped"] and not rows["synth1"]["skipped"]
     report = json.loads((out / "synth0.report.json").read_text())
     assert report["outputs"]["html"] == "synth0.report.html"
     page = (out / "synth0.report.html").read_text()

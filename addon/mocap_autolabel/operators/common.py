@@ -44,6 +44,15 @@ def reviewed_take(context) -> bpy.types.Collection | None:
     return coll if has_review(coll) else None
 
 
+def beside_source(coll: bpy.types.Collection, ending: str) -> str:
+    """A default output path for a take: its source file's path with ``ending`` instead of the extension
+    (``take_labeled.c3d``), or the collection's name with it where the take has no source file."""
+    import os
+
+    src = coll.get("mocap_source") or coll.name
+    return os.path.splitext(bpy.path.abspath(src) if src else coll.name)[0] + ending
+
+
 def reviewed_panel_take(context) -> bpy.types.Collection | None:
     """:func:`panel_take` where it has been labeled, else None."""
     from ..blender.takes import has_review

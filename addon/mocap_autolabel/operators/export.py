@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import os
-
 import bpy
 from bpy.props import StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from .common import reviewed_panel_take
+from .common import beside_source, reviewed_panel_take
 
 
 class MOCAPAL_OT_export_labeled(bpy.types.Operator, ExportHelper):
@@ -29,8 +27,7 @@ class MOCAPAL_OT_export_labeled(bpy.types.Operator, ExportHelper):
     def invoke(self, context, event):
         coll = reviewed_panel_take(context)
         if not self.filepath and coll is not None:
-            src = coll.get("mocap_source") or coll.name
-            self.filepath = os.path.splitext(bpy.path.abspath(src) if src else coll.name)[0] + "_labeled.c3d"
+            self.filepath = beside_source(coll, "_labeled.c3d")
         return ExportHelper.invoke(self, context, event)
 
     def execute(self, context):

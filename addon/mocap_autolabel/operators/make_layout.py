@@ -3,13 +3,11 @@ place on the template hand), then put in the Layout File field, so that the next
 
 from __future__ import annotations
 
-import os
-
 import bpy
 from bpy.props import EnumProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from .common import panel_take
+from .common import beside_source, panel_take
 
 
 class MOCAPAL_OT_make_layout(bpy.types.Operator, ExportHelper):
@@ -41,8 +39,7 @@ class MOCAPAL_OT_make_layout(bpy.types.Operator, ExportHelper):
     def invoke(self, context, event):
         coll = panel_take(context)
         if not self.filepath and coll is not None:
-            src = coll.get("mocap_source") or coll.name
-            self.filepath = os.path.splitext(bpy.path.abspath(src) if src else coll.name)[0] + "_layout.toml"
+            self.filepath = beside_source(coll, "_layout.toml")
         return ExportHelper.invoke(self, context, event)
 
     def execute(self, context):
