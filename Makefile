@@ -35,7 +35,8 @@ venv: $(VENV)/.extras-$(DEMO_EXTRAS)
 ## (labeled markers keyed by confidence + the solved hand) -> a calibrated, solved hand rig (.blend, FBX, BVH,
 ## report) -> the labeled markers' gaps filled from that hand (out/demo_filled.c3d, fills marked as computed);
 ## also the raw take alone and beside the hand that made it; then a synthetic take of two interacting hands,
-## labeled (L_/R_ names, scored against its truth) into a review scene with both solved hands
+## labeled (L_/R_ names, scored against its truth) into a review scene with both solved hands; a sparse finger set
+## (5 tips + a hand cluster) labeled with no model of its own; and a layout TOML fitted from the labeled demo take
 demo: $(VENV)/.extras-$(DEMO_EXTRAS)
 	$(BIN)/python -m mocap_autolabel info samples/demo_take.c3d
 	$(BIN)/python -m mocap_autolabel label samples/demo_take.c3d --layout han19 -o out/demo_labeled.c3d --report out/demo_report.json --blend out/demo_review.blend --solve-hand
@@ -46,7 +47,10 @@ demo: $(VENV)/.extras-$(DEMO_EXTRAS)
 	$(BIN)/python -m mocap_autolabel synth --layout han19 --frames 1200 --seed 1 -o out/demo_take.c3d --blend out/demo_truth.blend
 	$(BIN)/python -m mocap_autolabel synth --hands 2 --layout han19 --frames 1200 --seed 2 -o out/demo_two_hands.c3d
 	$(BIN)/python -m mocap_autolabel label out/demo_two_hands.c3d --layout han19 -o out/demo_two_hands_labeled.c3d --blend out/demo_two_hands_review.blend --solve-hand
-	@echo "demo: open out/demo_review.blend in Blender with the add-on (Mocap tab > Review: labels coloured by confidence + the solved hand), out/demo_hand.blend (solved rig), out/demo.blend (the raw take), out/demo_truth.blend (raw take + the true hand) and out/demo_two_hands_review.blend (two hands: Left hand / Right hand labels + Hand_L / Hand_R)"
+	$(BIN)/python -m mocap_autolabel synth --layout tips5_hand3 --frames 1200 --seed 3 -o out/demo_sparse.c3d
+	$(BIN)/python -m mocap_autolabel label out/demo_sparse.c3d --layout tips5_hand3 -o out/demo_sparse_labeled.c3d --report out/demo_sparse_report.json
+	$(BIN)/python -m mocap_autolabel layout --from out/demo_labeled.c3d -o out/demo_layout.toml
+	@echo "demo: open out/demo_review.blend in Blender with the add-on (Mocap tab > Review: labels coloured by confidence + the solved hand), out/demo_hand.blend (solved rig), out/demo.blend (the raw take), out/demo_truth.blend (raw take + the true hand), out/demo_two_hands_review.blend (two hands: Left hand / Right hand labels + Hand_L / Hand_R), out/demo_sparse_labeled.c3d (a sparse finger set) and out/demo_layout.toml (a layout fitted from a labeled take)"
 
 ## test: ruff, then every test (real-data tests skip when ../shared/data is absent)
 test: $(VENV)/.extras-$(TEST_EXTRAS) lint

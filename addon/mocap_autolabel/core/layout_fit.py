@@ -138,6 +138,9 @@ def guess_spots(observed: np.ndarray, labeler_for: Callable[[Layout], object],
     return [int(s) for s in spots]
 
 
+#: The calibration's pull towards each marker's first spot (its offset prior): a lone marker on a
+#: distal phalanx slides along its arc as freely as the joint angles turn, and only this settles it.
+FIT_PRIOR = 0.0005
 #: Rounds of calibration, each but the last followed by :func:`steadiest_bones`.
 ROUNDS = 2
 
@@ -241,10 +244,10 @@ def fit_layout(observed: np.ndarray, names: list[str], *, name: str = "fitted", 
         share = (0.2 + 0.75 * round_ / ROUNDS, 0.75 / ROUNDS)
         last = round_ == ROUNDS - 1
         try:  # the hand's size only once the markers sit on their bones: a marker on the wrong one drags it
-            cal = calibrate(observed, layout, frames=frames, prior=0.00005, solve_size=last,
+            cal = calibrate(observed, layout, frames=frames, prior=FIT_PRIOR, solve_size=last,
                             progress=lambda s, a=share: tick(a[0] + a[1] * s))
         except ValueError:  # an implausible size: the average hand's
-            cal = calibrate(observed, layout, frames=frames, prior=0.00005, solve_size=False)
+            cal = calibrate(observed, layout, frames=frames, prior=FIT_PRIOR, solve_size=False)
         hand = cal.hand()
         rest = layout.place(hand)[0].rest + cal.offsets
         bones = [BONE_INDEX[mk.bone] for mk in layout.markers]
