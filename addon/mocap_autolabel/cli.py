@@ -64,7 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("file", metavar="FILE")
     imp.add_argument("--blend", required=True, metavar="OUT.blend", help="the .blend file to write")
     imp.add_argument("--scale", type=float, default=1.0, help="factor on positions in metres (default 1)")
-    imp.add_argument("--frame-offset", type=int, default=0, help="added to the file's frame numbers; the take must stay on scene frames 0 or later")
+    imp.add_argument("--frame-offset", type=int, default=0,
+                     help="added to the file's frame numbers; the take must stay on scene frames 0 or later")
     imp.add_argument("--names", default="*", metavar="PATTERN",
                      help="import only points whose name matches (* and ? wildcards)")
     imp.add_argument("--point-cloud", action="store_true",
