@@ -17,6 +17,7 @@ import fnmatch
 import os
 import re
 import tomllib
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -161,7 +162,9 @@ def steadiest_bones(observed: np.ndarray, layout: Layout, cal, bones: list[int],
     r, t = hand.skinning_transforms(fit.poses[ok])  # (F, 20, 3, 3), (F, 20, 3): rest -> posed
     p = observed[picked][ok]  # (F, M, 3)
     local = np.einsum("fbji,fmbj->fmbi", r, p[:, :, None, :] - t[:, None])  # (F, M, 20, 3) in rest space
-    spread = np.nanmean(np.sum((local - np.nanmean(local, axis=0)) ** 2, axis=-1), axis=0)  # (M, 20)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a marker unseen in every frame: NaN, left as it is
+        spread = np.nanmean(np.sum((local - np.nanmean(local, axis=0)) ** 2, axis=-1), axis=0)  # (M, 20)
     spread[:, 0] *= 0.8  # the palm before a metacarpal that moves with it
     new_bones, new_rest = list(bones), rest.copy()
     for j in range(len(bones)):

@@ -178,6 +178,15 @@ def offer_nulls(found: Hands, labeling: Labeling, take: Take, most: float = np.i
     return int(len(chosen)), np.flatnonzero(offer.any(axis=1))
 
 
+def hand_markers(take: Take, per: np.ndarray, m: int, hand: int) -> np.ndarray:
+    """``(F, m, 3)``: hand ``hand``'s labeled markers (labels ``hand * m`` to ``hand * m + m - 1`` of the
+    per-sample labels ``per`` ``(F, P)``), metres, NaN where not labeled."""
+    observed = np.full((take.n_frames, m, 3), np.nan)
+    f, p = np.nonzero((per >= hand * m) & (per < (hand + 1) * m))
+    observed[f, per[f, p] - hand * m] = take.positions[f, p]
+    return observed
+
+
 def labeled_handedness(take: Take, layout: Layout, labeling: Labeling, hands: int) -> np.ndarray:
     """int8 ``(F, hands)``: the handedness of each hand's labeled markers per frame
     (:func:`..hands.handedness`; 0 throughout for a layout of fewer than four markers)."""
@@ -187,10 +196,7 @@ def labeled_handedness(take: Take, layout: Layout, labeling: Labeling, hands: in
     if m < 4:
         return right
     for h in range(hands):
-        observed = np.full((take.n_frames, m, 3), np.nan)
-        f, p = np.nonzero((per >= h * m) & (per < (h + 1) * m))
-        observed[f, per[f, p] - h * m] = take.positions[f, p]
-        right[:, h] = handedness(observed, layout)
+        right[:, h] = handedness(hand_markers(take, per, m, h), layout)
     return right
 
 
@@ -200,15 +206,13 @@ def body_evidence(take: Take, layout: Layout, labeling: Labeling, hands: int) ->
     if named is None:
         return [None] * hands
     cols = np.flatnonzero(named)
-    m = len(layout)
     per = labeling.per_sample()
     centres = np.full((take.n_frames, hands, 3), np.nan)
     for h in range(hands):
-        mine = (per >= h * m) & (per < (h + 1) * m)
-        count = mine.sum(axis=1)
-        total = np.where(mine[..., None], np.nan_to_num(take.positions), 0.0).sum(axis=1)
-        seen = count > 0
-        centres[seen, h] = total[seen] / count[seen, None]
+        observed = hand_markers(take, per, len(layout), h)
+        count = np.isfinite(observed[..., 0]).sum(axis=1)
+        seen = count > 0  # a mean of frames with labels only: no empty slices
+        centres[seen, h] = np.nansum(observed[seen], axis=1) / count[seen, None]
     return body_side_evidence(take.positions[:, cols], [body_side(take.names[c]) for c in cols], centres)
 
 
