@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..hand.skeleton import BONE_NAMES, PARENTS, HandModel
+from ..hand.skeleton import PARENTS, HandModel
 
 
 @dataclass(frozen=True)
@@ -17,10 +17,13 @@ class SourceHand:
         side: ``"left"`` or ``"right"``.
         rotations: ``(F, 20, 3, 3)`` each bone frame's world rotation (y along the bone, z dorsal),
             bones in :data:`..hand.skeleton.BONE_NAMES` order; NaN on frames without a pose.
-        heads: ``(F, 20, 3)`` each bone's proximal joint in the world, metres.
+        heads: ``(F, 20, 3)`` each bone's proximal joint in the world, metres (the rig object's
+            scale taken off: the scene shows them ``scale`` times larger).
         lengths: ``(20,)`` bone lengths, metres.
-        radii: ``(20,)`` bone radii (the finger's flesh around the bone), metres.
+        radii: ``(20,)`` skin radius at each bone's distal end, metres (:attr:`..hand.skeleton.HandModel.bone_radii`).
         rest: ``(20, 3, 3)`` rest rotations in the hand (palm) frame.
+        rest_heads: ``(20, 3)`` rest positions of the bones' heads in the hand frame, metres.
+        scale: scene units per metre (the take's import Scale, which our rig object carries).
     """
 
     side: str
@@ -29,6 +32,8 @@ class SourceHand:
     lengths: np.ndarray
     radii: np.ndarray
     rest: np.ndarray
+    rest_heads: np.ndarray
+    scale: float = 1.0
 
     @classmethod
     def from_poses(cls, hand: HandModel, poses: np.ndarray) -> SourceHand:
@@ -37,8 +42,8 @@ class SourceHand:
         rot, pos = hand.forward(np.nan_to_num(poses))
         bad = ~np.isfinite(poses).all(axis=1)
         rot[bad], pos[bad] = np.nan, np.nan
-        return cls(hand.side, rot, pos, np.asarray(hand.bone_lengths, float), np.asarray(hand.bone_radii, float),
-                   hand.rest[0])
+        return cls(hand.side, rot, pos, np.asarray(hand.bone_lengths, float), np.asarray(hand.bone_radii, float)[:, 1],
+                   hand.rest[0], hand.rest[1])
 
     @classmethod
     def from_bases(cls, side: str, rest: np.ndarray, quaternions: np.ndarray, root_location: np.ndarray,
@@ -60,16 +65,18 @@ class SourceHand:
                 posed[:, b] = rest[b] @ basis[:, b]
             else:
                 posed[:, b] = posed[:, p] @ (np.linalg.inv(rest[p]) @ rest[b]) @ basis[:, b]
-        if world is not None:
+        scale = 1.0
+        if world is not None:  # bones stay in metres: the object's scale only shows them at the take's size
             w = np.asarray(world, dtype=float)
-            scale = np.cbrt(abs(np.linalg.det(w[:3, :3])))
+            scale = float(np.cbrt(abs(np.linalg.det(w[:3, :3]))))
             unit = w.copy()
             unit[:3, :3] /= scale
+            unit[:3, 3] /= scale
             posed = unit @ posed
-            posed[..., :3, 3] *= 1.0  # bones stay in metres: the object's scale only shows them at the take's size
-        assert len(BONE_NAMES) == 20
+        to_palm = np.linalg.inv(rest[0])
         return cls(side, posed[..., :3, :3], posed[..., :3, 3], np.asarray(lengths, float),
-                   np.asarray(radii, float), np.linalg.inv(rest[0])[:3, :3] @ rest[:, :3, :3])
+                   np.asarray(radii, float), to_palm[:3, :3] @ rest[:, :3, :3],
+                   (to_palm[:3, :3] @ rest[:, :3, 3, None])[..., 0] + to_palm[:3, 3], scale)
 
     @property
     def frames(self) -> int:
