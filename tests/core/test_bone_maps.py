@@ -144,19 +144,35 @@ def test_rigify_metarig():
     _check_rules(m)
 
 
-def test_rigify_generated_rig_maps_its_deform_bones():
+def test_rigify_generated_rig_maps_its_controls():
+    """A generated rig's FK controls (the meta-rig's names; the hand's is ``hand_fk.L``) take the keys:
+    its ``DEF-`` bones follow them through constraints, so keys there would do nothing."""
     names, parents = rigify_generated()
     assert "hand.L" not in names and "f_index.01.L" in names  # controls share the meta-rig's finger names
     m = auto_map(names, parents)
     assert m.convention == "rigify"
+    controls = {b: n for b, n in RIGIFY_LEFT.items() if n in names}
+    controls["palm"] = "hand_fk.L"
+    assert m.sides["left"] == controls
+    assert m.sides["right"] == {b: n.replace(".L", ".R") for b, n in controls.items()}
+    assert {"thumb_prox", "index_prox", "little_dist"} <= set(controls)
+    _check_rules(m)
+
+
+def test_rigify_deform_bones_when_no_controls():
+    names, parents = rigify_generated()
+    keep = [i for i, n in enumerate(names) if n.startswith(("DEF-", "ORG-"))]
+    names2 = [names[i] for i in keep]
+    parents2 = [parents[i] if parents[i] in names2 else None for i in keep]
+    m = auto_map(names2, parents2)
+    assert m.convention == "rigify"
     assert m.sides["left"] == {b: "DEF-" + n for b, n in RIGIFY_LEFT.items()}
-    assert m.sides["right"] == {b: "DEF-" + n.replace(".L", ".R") for b, n in RIGIFY_LEFT.items()}
     _check_rules(m)
 
 
 def test_rigify_org_bones_when_no_deform_bones():
     names, parents = rigify_generated()
-    keep = [i for i, n in enumerate(names) if not n.startswith("DEF-")]
+    keep = [i for i, n in enumerate(names) if n.startswith("ORG-")]
     names2 = [names[i] for i in keep]
     parents2 = [parents[i] if parents[i] in names2 else None for i in keep]
     m = auto_map(names2, parents2)

@@ -134,6 +134,9 @@ class TableConvention(Convention):
     """
 
     prefixes: ClassVar[tuple[str, ...]] = ("",)
+    #: Whether the usual prefixes' order outranks how many bones a prefix maps (Rigify: a generated
+    #: rig's controls, unprefixed, before its ``DEF-`` bones, which constraints drive).
+    prefix_first: ClassVar[bool] = False
 
     @classmethod
     def cores(cls, side: str) -> dict[str, tuple[str, ...]]:
@@ -185,7 +188,8 @@ class TableConvention(Convention):
                     if "palm" not in group or (prefix not in cls.prefixes and _helper_prefix(prefix)):
                         continue
                     pref = cls.prefixes.index(prefix) if prefix in cls.prefixes else len(cls.prefixes)
-                    key = (-len(group), pref, v, len(prefix), prefix)
+                    key = (pref, -len(group), v, len(prefix), prefix) if cls.prefix_first else \
+                        (-len(group), pref, v, len(prefix), prefix)
                     if best is None or key < best[0]:
                         best = (key, {b: n for b, (_, n) in group.items()})
             if best is not None:
@@ -210,12 +214,13 @@ class Rigify(TableConvention):
     name = "rigify"
     label = "Rigify"
     prefixes = ("", "DEF-", "ORG-")
+    prefix_first = True
     _FINGER = {"index": "index", "middle": "middle", "ring": "ring", "little": "pinky"}
 
     @classmethod
     def cores(cls, side: str) -> dict[str, tuple[str, ...]]:
         s = ".L" if side == "left" else ".R"
-        out = {"palm": (f"hand{s}",)}
+        out = {"palm": (f"hand{s}", f"hand_fk{s}")}  # a generated rig's FK hand control
         for i, seg in enumerate(SEGMENTS["thumb"], 1):
             out[f"thumb_{seg}"] = (f"thumb.0{i}{s}",)
         for k, finger in enumerate(FINGERS, 1):
@@ -283,7 +288,7 @@ class UE5(TableConvention):
     @classmethod
     def cores(cls, side: str) -> dict[str, tuple[str, ...]]:
         s = "_l" if side == "left" else "_r"
-        out = {"palm": (f"hand{s}",)}
+        out = {"palm": (f"hand{s}", f"hand_fk{s}")}  # a generated rig's FK hand control
         for i, seg in enumerate(SEGMENTS["thumb"], 1):
             out[f"thumb_{seg}"] = (f"thumb_0{i}{s}",)
         for finger in FINGERS:
@@ -738,6 +743,11 @@ class BoneMap:
         return cls.from_dict(data, where)
 
 
+#: How many times more bones the generic name patterns must map than the best named convention to
+#: be preferred (a generated Rigify rig's controls before the patterns' reading of its deform bones).
+GENERIC_MARGIN = 1.5
+
+
 def auto_map(names: Iterable[str], parents: Parents = None) -> BoneMap:
     """The bone map of a character with bones ``names`` (and hierarchy ``parents``, see :data:`Parents`):
     the convention in :data:`CONVENTIONS` that maps the most bones (both sides together; ties: the more
@@ -748,11 +758,15 @@ def auto_map(names: Iterable[str], parents: Parents = None) -> BoneMap:
     names = list(names)
     best = BoneMap(Generic.name)
     for name, convention in CONVENTIONS.items():
-        sides = convention.match(names, parents)
-        found = BoneMap(name, sides)
+        if convention is Generic:
+            continue
+        found = BoneMap(name, convention.match(names, parents))
         if found.count > best.count:
             best = found
-    return best
+    generic = BoneMap(Generic.name, Generic.match(names, parents))
+    # Name patterns also read a known convention's bones (helpers and copies included): they win only
+    # where the conventions' tables read clearly fewer.
+    return generic if generic.count > GENERIC_MARGIN * best.count else best
 
 
 def export_names(convention: str, side: str) -> dict[str, str]:
