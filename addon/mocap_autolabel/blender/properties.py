@@ -1,5 +1,6 @@
 """Settings of the review in the scene (``scene.mocap_autolabel``), with its uncertain-segment list and
-its list of corrections.
+its list of corrections; and the Retarget panel's character, editable bone map and options
+(``scene.mocap_autolabel.retarget``, filled by ``retarget.py``).
 
 The lists are derived from the take's stored labeling and review (``takes.py``) and rebuilt
 after every change (and when Confident at changes) by ``lists.py``; they live in the scene so that the
@@ -173,6 +174,61 @@ class MOCAPAL_PG_correction(bpy.types.PropertyGroup):
     frame_end: IntProperty(name="End")
 
 
+def is_character(_self, obj) -> bool:
+    """Poll of the Retarget panel's Armature field: armatures, not our own solved hands."""
+    return obj is not None and obj.type == "ARMATURE" and "mocap_calibration" not in obj
+
+
+def _character_changed(self, context):
+    """A new character in the Retarget panel: its bones mapped automatically into the list."""
+    from .retarget import fill_map
+
+    arm = self.armature
+    if arm is not None and not is_character(self, arm):
+        self.armature = None  # Python can assign anything; the field only offers characters
+        return
+    if arm is None or self.map_armature != arm.name or not self.bone_map:
+        fill_map(self, arm)
+
+
+#: The Retarget panel's Reference: the character's rest pose, or a solved frame.
+REFERENCE_ITEMS = [("rest", "Rest Pose", "The character's rest pose is our hand posed like it (each of our bones "
+                                         "swung onto its counterpart): rest fingers curled or spread differently "
+                                         "still end in our pose"),
+                   ("frame", "Frame", "A solved frame of the take is the character's rest pose")]
+#: The Retarget panel's Wrist (the core's WRIST_MODES).
+WRIST_ITEMS = [("fingers", "Fingers Only", "The character's hand bone stays on its own forearm; the fingers move"),
+               ("rotation", "Rotation", "The hand bone also turns as our palm does in the world"),
+               ("world", "Rotation and Position", "The hand bone also turns and moves to our wrist")]
+
+
+class MOCAPAL_PG_bone_pair(bpy.types.PropertyGroup):
+    """One row of the Retarget panel's bone map: which of the character's bones is our bone on a side."""
+
+    side: StringProperty(name="Side")
+    ours: StringProperty(name="Hand Bone")
+    theirs: StringProperty(name="Bone", description="The character's bone that follows this bone of the solved "
+                                                    "hand (empty: none)")
+
+
+class MOCAPAL_PG_retarget(bpy.types.PropertyGroup):
+    """The Retarget panel: the character, its editable bone map and the options."""
+
+    armature: PointerProperty(type=bpy.types.Object, name="Armature", poll=is_character, update=_character_changed,
+                              description="The character's armature to key the solved hands on")
+    bone_map: CollectionProperty(type=MOCAPAL_PG_bone_pair)
+    bone_map_index: IntProperty(name="Bone", default=-1)
+    map_armature: StringProperty(options={"HIDDEN"})  # the armature the list was made for
+    convention: StringProperty(name="Convention", options={"HIDDEN"})
+    reference: EnumProperty(name="Reference", items=REFERENCE_ITEMS, default="rest")
+    reference_frame: IntProperty(name="Reference Frame", default=1,
+                                 description="The solved frame that is the character's rest pose")
+    wrist: EnumProperty(name="Wrist", items=WRIST_ITEMS, default="fingers")
+    pinch: BoolProperty(name="Keep Pinches", default=False,
+                        description="Where our thumb touches a finger, keep the character's thumb and finger "
+                                    "tips as close (a small correction of both)")
+
+
 class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     take: PointerProperty(type=bpy.types.Collection, name="Take", update=_take_changed, poll=is_take,
                           description="The imported take to label and review")
@@ -202,6 +258,7 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     # (several segments can start on one frame; the frame alone cannot say which one is current).
     walk_slot: IntProperty(default=-1, options={"HIDDEN"})
     walk_frame: IntProperty(default=0, options={"HIDDEN"})
+    retarget: PointerProperty(type=MOCAPAL_PG_retarget)
 
 
 @bpy.app.handlers.persistent
@@ -221,7 +278,8 @@ def on_load(*_args) -> None:
                 break
 
 
-classes = (MOCAPAL_PG_uncertain, MOCAPAL_PG_correction, MOCAPAL_PG_settings)
+classes = (MOCAPAL_PG_uncertain, MOCAPAL_PG_correction, MOCAPAL_PG_bone_pair, MOCAPAL_PG_retarget,
+           MOCAPAL_PG_settings)
 
 
 def register() -> None:

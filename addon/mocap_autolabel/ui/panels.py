@@ -1,4 +1,4 @@
-"""The Mocap tab of the 3D View sidebar: label a take, see what needs review, fix it."""
+"""The Mocap tab of the 3D View sidebar: label a take, see what needs review, fix it, retarget the solved hands."""
 
 from __future__ import annotations
 
@@ -56,6 +56,63 @@ class MOCAPAL_PT_label(_Sidebar, bpy.types.Panel):
         col.prop(settings, "hands")
         col.operator("mocap_autolabel.label", icon="SORTALPHA")
         col.operator("mocap_autolabel.solve_hand", icon="VIEW_PAN")
+
+
+class MOCAPAL_UL_bone_map(bpy.types.UIList):
+    """The Retarget panel's bone map: side, our bone, and the character's bone (picked from its bones)."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        row = layout.row(align=True)
+        split = row.split(factor=0.45, align=True)
+        split.label(text=f"{item.side[0].upper()}  {item.ours}", icon="BONE_DATA" if item.theirs else "BLANK1")
+        arm = data.armature
+        if arm is not None and arm.type == "ARMATURE":
+            split.prop_search(item, "theirs", arm.data, "bones", text="")
+        else:
+            split.prop(item, "theirs", text="")
+
+    def filter_items(self, context, data, propname):
+        """The filter text matches our bone, the side or the character's bone."""
+        items = getattr(data, propname)
+        flags = [self.bitflag_filter_item] * len(items)
+        text = self.filter_name.lower()
+        if text:
+            flags = [self.bitflag_filter_item if text in f"{i.side} {i.ours} {i.theirs}".lower() else 0
+                     for i in items]
+        return flags, []
+
+
+class MOCAPAL_PT_retarget(_Sidebar, bpy.types.Panel):
+    """Key the solved hands onto the animator's own character."""
+
+    bl_label = "Retarget"
+    bl_parent_id = "MOCAPAL_PT_label"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        settings = context.scene.mocap_autolabel.retarget
+        layout = self.layout
+        col = layout.column()
+        col.use_property_split = True
+        col.use_property_decorate = False
+        col.prop(settings, "armature")
+        col.prop(settings, "wrist")
+        col.prop(settings, "reference")
+        if settings.reference == "frame":
+            col.prop(settings, "reference_frame")
+        col.prop(settings, "pinch")
+        if settings.convention:
+            layout.label(text=f"Bone map ({settings.convention}):")
+        row = layout.row()
+        row.template_list("MOCAPAL_UL_bone_map", "", settings, "bone_map", settings, "bone_map_index", rows=6)
+        side = row.column(align=True)
+        side.operator("mocap_autolabel.retarget_auto_map", text="", icon="FILE_REFRESH")
+        side.operator("mocap_autolabel.retarget_save_map", text="", icon="FILE_TICK")
+        side.operator("mocap_autolabel.retarget_load_map", text="", icon="FILEBROWSER")
+        op = layout.operator("mocap_autolabel.retarget", icon="ARMATURE_DATA")
+        op.armature = settings.armature.name if settings.armature is not None else ""
+        op.reference, op.reference_frame = settings.reference, settings.reference_frame
+        op.wrist, op.pinch = settings.wrist, settings.pinch
 
 
 class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
@@ -169,5 +226,5 @@ class MOCAPAL_PT_legend(_Sidebar, bpy.types.Panel):
         layout.label(text="Dope Sheet: View > Show Group Colors", icon="INFO")
 
 
-classes = (MOCAPAL_UL_uncertain, MOCAPAL_UL_corrections, MOCAPAL_PT_label, MOCAPAL_PT_review, MOCAPAL_PT_relabel,
-           MOCAPAL_PT_corrections, MOCAPAL_PT_legend)
+classes = (MOCAPAL_UL_uncertain, MOCAPAL_UL_corrections, MOCAPAL_UL_bone_map, MOCAPAL_PT_label, MOCAPAL_PT_retarget,
+           MOCAPAL_PT_review, MOCAPAL_PT_relabel, MOCAPAL_PT_corrections, MOCAPAL_PT_legend)
