@@ -162,8 +162,7 @@ def _change_points(logp: np.ndarray, frames: np.ndarray, min_run: int, penalty: 
     before = csum[cut]  # (C, L)
     after = csum[-1][None] - before
     # Best pair of different labels on the two sides: top two of each side suffice.
-    b2 = np.argsort(before, axis=1)[:, -2:]
-    a2 = np.argsort(after, axis=1)[:, -2:]
+    b2, a2 = _top_two(before), _top_two(after)
     rows = np.arange(len(cut))
     gain = np.full(len(cut), -np.inf)
     for i in range(2):
@@ -177,6 +176,15 @@ def _change_points(logp: np.ndarray, frames: np.ndarray, min_run: int, penalty: 
     at = cut[c]
     return (_change_points(logp[:at], frames[:at], min_run, penalty) + [int(frames[at])]
             + _change_points(logp[at:], frames[at:], min_run, penalty))
+
+
+def _top_two(x: np.ndarray) -> np.ndarray:
+    """``(C, 2)``: the columns of each row's second-largest and largest value (a full sort of every
+    row costs several times more)."""
+    first = np.argmax(x, axis=1)
+    rest = x.copy()
+    rest[np.arange(len(x)), first] = -np.inf
+    return np.stack([np.argmax(rest, axis=1), first], axis=1)
 
 
 def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: str = "likelihood",
