@@ -164,16 +164,18 @@ def test_a_new_solve_refills_the_gaps_filled_from_the_hand(labeled):
 
 
 @pytest.mark.slow
-def test_hand_fill_after_solve_hand_fills_from_the_solved_rig(labeled):
+def test_hand_fill_after_solve_hand_fills_from_the_solved_rig(labeled, capfd):
     """The whole path: Solve Hand (a real calibration and solve), then Fill Gaps with the hand: the
-    rig's calibration is solved again on the labels and every gap inside a label's span is filled
-    from it, near the take's true markers."""
+    solve the rig keeps is used as it is (the labels did not change) and every gap inside a label's
+    span is filled from it, near the take's true markers."""
     from mocap_autolabel.blender.fill import fill_record, filled_keys
 
     bpy, coll = labeled
     assert bpy.ops.mocap_autolabel.solve_hand() == {"FINISHED"}
     _select(bpy)
     assert bpy.ops.mocap_autolabel.fill_gaps(method="hand", max_gap=1.0) == {"FINISHED"}
+    said = capfd.readouterr().out  # the operator's message says when it solves the hand again
+    assert "Filled" in said and "solved again" not in said
     record = fill_record(coll)
     assert record["gaps"] and {g["method"] for g in record["gaps"]} == {"hand"}
     idx, labels, at = filled_keys(coll, len(state(coll).labeling.names))

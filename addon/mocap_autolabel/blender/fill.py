@@ -11,13 +11,20 @@ its fills go (the record drops them) and *Fill Gaps* fills them again; a marker 
 its confidence colours keeps them. A re-solve of the hand refills every filled gap with the new
 solve.
 
-The fill is the core's (:func:`core.process.process_take`); the hand comes from the take's solved rig
-(its calibration, solved again on the current labels), where there is one.
+The fill is the core's (:func:`core.process.process_take`); the hand comes from the take's solved rig,
+where there is one: the solve it keeps (:func:`.armature.keep_solve`: calibration, poses, and a digest
+of each frame's markers it was solved from) is used as it is while the labels give the same markers,
+and where they changed only the frames around the change are solved again, with the kept
+calibration (:func:`core.fill.update_solve`); the rig is keyed again and keeps the new solve. Fill
+Gaps gathers its inputs on the main thread (:func:`prepare_fill`), works on a worker thread
+(:meth:`FillRequest.run`, no Blender data) and writes the scene on the main thread
+(:func:`finish_fill`).
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
@@ -28,6 +35,7 @@ from ..core.process import Outputs, process_take
 from ..core.review import marker_classes
 from ..core.settings import LabelSettings
 from . import animio
+from .armature import kept_solve
 from .markers import finger_of, key_type_values, labeled_object
 from .scene import key_track
 from .takes import current_take, first_frame, key_sure, load_state, state_layout
@@ -129,11 +137,9 @@ def _key_label(take_coll: bpy.types.Collection, take, layout, labeling, label: i
               hold_type="MOVING_HOLD")
 
 
-def take_calibrations(take_coll: bpy.types.Collection) -> dict:
-    """``{side: Calibration}`` of the hands solved from the take (side ``""`` for one hand), from the
-    calibration each solved rig keeps."""
-    from ..core.hand.calibrate import Calibration
-
+def solved_rigs(take_coll: bpy.types.Collection) -> dict[str, bpy.types.Object]:
+    """``{side: armature}``: the rigs solved from the take (side ``""`` for one hand) that keep a
+    calibration."""
     out = {}
     for coll in bpy.data.collections:
         source = coll.get("mocap_solved_from")
@@ -141,49 +147,136 @@ def take_calibrations(take_coll: bpy.types.Collection) -> dict:
             continue
         side = "" if source == take_coll.name else str(source).split(":")[-1]
         for obj in coll.all_objects:
-            if "mocap_calibration" in obj:
-                out[side] = Calibration.from_dict(json.loads(obj["mocap_calibration"]), f"{obj.name}'s calibration")
+            if obj.type == "ARMATURE" and "mocap_calibration" in obj:
+                out[side] = obj
     return out
 
 
-def fill_scene(take_coll: bpy.types.Collection, method: str = "auto", max_gap: float = 1.0,
-               labels: list[int] | None = None, solves: list | None = None) -> dict:
-    """Fill the gaps of the take's labeled markers (``labels``, default all) and key the fills.
+@dataclass
+class FillRequest:
+    """Everything a fill needs, gathered on the main thread (:func:`prepare_fill`) so that :meth:`run`
+    touches no Blender data (it runs on a worker thread while Blender stays responsive).
 
-    The hand (``hand``, ``auto``) is the take's solved rig, solved again on the current labels with
-    its calibration, or ``solves`` (``[(side, HandSolve)]``) where given. Returns the fill's report
-    (:meth:`core.fill.TakeFill.report`) for those labels.
-
-    Raises:
-        MocapInputError: ``hand`` was asked and the take has no solved hand.
+    ``kept`` is the solve each rig of the take keeps (:func:`.armature.kept_solve`), by side; the
+    fill uses it as it is where the labels did not change since, and solves again only the
+    frames that changed; ``solves`` (``[(side, HandSolve)]``) where given are used instead.
     """
+
+    take_name: str
+    take: object  # the labeled take (metres, the scene's frames)
+    layout: object
+    naming: str | None
+    method: str
+    max_gap: float
+    labels: list[int]  # the labels whose fills are keyed
+    kept: dict = field(default_factory=dict)
+    solves: list | None = None
+    token: str = ""  # the review state's token it was gathered from
+    rigs: dict = field(default_factory=dict)  # per side, the kept solve's rig (:func:`_rig_key`)
+    share: float = 0.0  # of the work done, set as the fill goes
+    stage: str = "starting"
+
+    def run(self, say=None) -> FillResult:
+        """The hands brought up to date with the labels (:func:`~..core.fill.update_solve`) and the
+        fill (:func:`~..core.process.process_take`). ``say(message)`` hears each stage and may raise to
+        stop (a cancelled Job's does)."""
+        from ..core.fill import fill_method, update_solve
+        from ..core.hands import HandNaming, split_hands
+
+        def progress(message: str, share: float) -> None:
+            self.stage, self.share = message, share
+            if say is not None:
+                say(message)
+
+        solves, updated = self.solves, {}
+        if solves is None and self.kept and fill_method(self.method).uses_hand:
+            hands = split_hands(self.take, self.layout, HandNaming(self.naming) if self.naming else None)
+            mine = [(side, one) for side, one in hands if side in self.kept]
+            solves = [] if mine else None  # None: no hand of the take is solved (``hand`` says so)
+            for i, (side, one) in enumerate(mine):
+                def per_hand(message: str, share: float, i: int = i, side: str = side) -> None:
+                    progress(f"{side} hand: {message}" if side else message, 0.9 * (i + share) / len(mine))
+
+                solved, digests, facts = update_solve(self.kept[side], one, self.layout, per_hand)
+                solves.append((side, solved))
+                updated[side] = (solved, digests, facts)
+        progress("filling gaps", 0.9 if updated else 0.0)
+        outputs = Outputs(label=False, fill=self.method, max_gap=self.max_gap, calibrations={}, calibrate=False)
+        try:
+            filled = process_take(self.take, self.layout, LabelSettings(naming=self.naming), outputs,
+                                  solves=solves).filled
+        except MocapInputError as exc:  # named for the take in the scene
+            raise MocapInputError(self.take_name, exc.problem) from None
+        progress("filled", 1.0)
+        return FillResult(filled, updated)
+
+
+@dataclass
+class FillResult:
+    """What :meth:`FillRequest.run` made: the fill (:class:`~..core.fill.TakeFill`) and, per side
+    whose kept solve it used, ``(HandSolve, digests, facts)`` (:func:`~..core.fill.update_solve`)."""
+
+    filled: object
+    updated: dict
+
+
+def prepare_fill(take_coll: bpy.types.Collection, method: str = "auto", max_gap: float = 1.0,
+                 labels: list[int] | None = None, solves: list | None = None) -> FillRequest:
+    """The :class:`FillRequest` of Fill Gaps on the take's labeled markers ``labels`` (default all):
+    the take with its current labels and the solve each of its rigs keeps."""
     state = load_state(take_coll)
-    layout = state_layout(state)
     labeling = state.labeling
+    take = labeled_take(current_take(take_coll), labeling)
+    chosen = sorted(set(range(len(labeling.names)) if labels is None else labels))
+    kept, rigs = {}, {}
+    if solves is None:
+        for side, arm in solved_rigs(take_coll).items():
+            one = kept_solve(arm)
+            if one is not None:
+                kept[side], rigs[side] = one, _rig_key(arm)
+    return FillRequest(take_coll.name, take, state_layout(state), labeling.info.get("hands", {}).get("naming"),
+                       method, float(max_gap), chosen, kept, solves, state.token, rigs)
+
+
+def _rig_key(arm: bpy.types.Object) -> tuple:
+    """What tells a rig's kept solve from another: its name, calibration and poses' fingerprint."""
+    from .armature import SOLVE_RECORD
+
+    record = arm.get(SOLVE_RECORD) or {}
+    return arm.name, str(arm["mocap_calibration"]), str(record.get("fingerprint", "")), int(record.get("frames", 0))
+
+
+def finish_fill(take_coll: bpy.types.Collection, request: FillRequest, result: FillResult) -> dict:
+    """Key the fills of a :class:`FillRequest`'s labels, record them, and keep on each rig the solve
+    the fill brought up to date; the fill's report for those labels, with ``hand_solve``: per side,
+    what was solved again (``{"solved_frames": 0, ...}`` where the kept solve was used as it was)."""
+    from .armature import update_solved_hand
+
+    state = load_state(take_coll)
+    if state.token != request.token:  # relabeled while the fill ran in the background
+        raise MocapInputError(take_coll.name, "its labels changed while its gaps were being filled: Fill Gaps again")
+    rigs = solved_rigs(take_coll)
+    for side, (solved, digests, facts) in result.updated.items():
+        arm = rigs.get(side)
+        kept = request.kept[side]
+        if (arm is not None and _rig_key(arm) == request.rigs[side]  # not solved again meanwhile
+                and (facts["solved_frames"] or kept.digests is None)):
+            update_solved_hand(arm, solved, digests, kept.smooth_hz)
+    layout, labeling = state_layout(state), state.labeling
     take = current_take(take_coll)
-    lab_take = labeled_take(take, labeling)
-    pattern = labeling.info.get("hands", {}).get("naming")
-    # The take's rig is solved again on the current labels with its calibration; Solve Hand
-    # calibrates, the fill does not.
-    outputs = Outputs(label=False, fill=method, max_gap=max_gap, calibrations=take_calibrations(take_coll),
-                      calibrate=False)
-    try:
-        result = process_take(lab_take, layout, LabelSettings(naming=pattern), outputs, solves=solves).filled
-    except MocapInputError as exc:  # named for the take in the scene
-        raise MocapInputError(take_coll.name, exc.problem) from None
-    n = len(labeling.names)
-    chosen = sorted(set(range(n) if labels is None else labels))
+    filled = result.filled
+    chosen = request.labels
     for label in chosen:
-        _key_label(take_coll, take, layout, labeling, label, result.take.filled[:, label],
-                   result.take.positions[:, label])
+        _key_label(take_coll, take, layout, labeling, label, filled.take.filled[:, label],
+                   filled.take.positions[:, label])
     record = fill_record(take_coll)
     keep = [g for g in record.get("gaps", []) if g["label"] not in chosen]
-    mine = [g for g in result.gaps if g.marker in chosen]
-    record = {"method": method, "max_gap": max_gap,
+    mine = [g for g in filled.gaps if g.marker in chosen]
+    record = {"method": request.method, "max_gap": request.max_gap,
               "gaps": keep + [{"label": g.marker, "start": g.start, "stop": g.stop, "method": g.method,
                                "error_mm": round(1000 * g.error, 3)} for g in mine if g.filled]}
     _store(take_coll, record)
-    report = result.report()
+    report = filled.report()
     report["gap_list"] = [g.as_dict(take.rate, take.first_frame) for g in mine]
     report["filled"] = sum(1 for g in mine if g.filled)
     report["open"] = len(mine) - report["filled"]
@@ -192,7 +285,25 @@ def fill_scene(take_coll: bpy.types.Collection, method: str = "auto", max_gap: f
     for g in mine:
         if g.filled:
             report["methods"][g.method] = report["methods"].get(g.method, 0) + 1
+    report["hand_solve"] = {side: facts for side, (_, _, facts) in result.updated.items()}
     return report
+
+
+def fill_scene(take_coll: bpy.types.Collection, method: str = "auto", max_gap: float = 1.0,
+               labels: list[int] | None = None, solves: list | None = None) -> dict:
+    """Fill the gaps of the take's labeled markers (``labels``, default all) and key the fills, at
+    once (:func:`prepare_fill`, :meth:`FillRequest.run`, :func:`finish_fill`).
+
+    The hand (``hand``, ``auto``) is the solve the take's rig keeps, solved again where the labels
+    changed since (only around the frames that changed, with its calibration), or ``solves``
+    (``[(side, HandSolve)]``) where given. Returns the fill's report (:meth:`core.fill.TakeFill.report`)
+    for those labels.
+
+    Raises:
+        MocapInputError: ``hand`` was asked and the take has no solved hand.
+    """
+    request = prepare_fill(take_coll, method, max_gap, labels, solves)
+    return finish_fill(take_coll, request, request.run())
 
 
 def clear_fill(take_coll: bpy.types.Collection, labels: list[int] | None = None) -> int:

@@ -6,6 +6,7 @@ import bpy
 from bpy.props import EnumProperty, FloatProperty
 
 from .common import _not_a_take, _present, reviewed_panel_take
+from .modal import JobModal, in_background, start_modal
 
 _METHODS = [
     ("auto", "Auto", "Per gap, the method with the lowest expected error: hand (where solved), pose or spline"),
@@ -37,7 +38,7 @@ class _FillOperator:
         return _present(cls, reviewed_panel_take(context), why)
 
 
-class MOCAPAL_OT_fill_gaps(_FillOperator, bpy.types.Operator):
+class MOCAPAL_OT_fill_gaps(JobModal, _FillOperator, bpy.types.Operator):
     """Fill the gaps of the selected labeled markers (all labeled markers when none is selected): the
     filled keys get the Generated keyframe type, and the marker shows in the gap"""
 
@@ -50,15 +51,59 @@ class MOCAPAL_OT_fill_gaps(_FillOperator, bpy.types.Operator):
 
     def execute(self, context):
         from ..blender.fill import fill_scene
-        from ..core.errors import MocapInputError
 
         coll = reviewed_panel_take(context)
-        labels = _chosen_labels(context, coll)
+        self._selected = _chosen_labels(context, coll)
         try:
-            report = fill_scene(coll, self.method, self.max_gap, labels)
-        except MocapInputError as exc:
+            report = fill_scene(coll, **self.as_keywords(), labels=self._selected)
+        except Exception as exc:
+            return self._job_failed(exc)
+        return self._said(report)
+
+    def invoke(self, context, event):
+        """From the panel: the fill works on a worker thread while Blender stays responsive, the status
+        bar shows its stage, Esc cancels and leaves the scene as it was; from a script, at once."""
+        from ..blender.fill import prepare_fill
+        from ..core.jobs import Job
+
+        if not in_background(context):
+            return self.execute(context)
+        coll = reviewed_panel_take(context)
+        self._selected = _chosen_labels(context, coll)
+        try:
+            self._pending = prepare_fill(coll, **self.as_keywords(), labels=self._selected)
+        except Exception as exc:
+            return self._job_failed(exc)
+        return start_modal(self, context, Job(self._pending.run))
+
+    def _progress(self, job) -> tuple[str, float]:
+        request = self._pending
+        return f"Filling the gaps of {request.take_name}: {request.stage}", request.share
+
+    def _job_failed(self, exc: BaseException) -> set[str]:
+        from ..core.errors import MocapInputError
+
+        if isinstance(exc, MocapInputError):
             self.report({"ERROR"}, str(exc))
+        else:  # never let an unexpected failure take Blender down
+            self.report({"ERROR"}, f"filling gaps failed ({type(exc).__name__}: {exc})")
+        return {"CANCELLED"}
+
+    def _job_done(self, context, result) -> set[str]:
+        from ..blender.fill import finish_fill
+
+        coll = bpy.data.collections.get(self._pending.take_name)
+        if coll is None:
+            self.report({"ERROR"}, f"the take {self._pending.take_name!r} was removed while its gaps were filled")
             return {"CANCELLED"}
+        try:
+            report = finish_fill(coll, self._pending, result)
+        except Exception as exc:
+            return self._job_failed(exc)
+        return self._said(report)
+
+    def _said(self, report: dict) -> set[str]:
+        """Report what was filled (and what was solved again of the hand) in one line."""
         methods = ", ".join(f"{n} {k}" for k, n in sorted(report["methods"].items())) or "none"
         reasons: dict[str, int] = {}
         for gap in report["gap_list"]:
@@ -66,9 +111,12 @@ class MOCAPAL_OT_fill_gaps(_FillOperator, bpy.types.Operator):
                 key = gap["open"].split(" (")[0]
                 reasons[key] = reasons.get(key, 0) + 1
         left = "; ".join(f"{n} {why}" for why, n in sorted(reasons.items()))
-        which = "all labeled markers" if labels is None else f"{len(labels)} selected marker{'s' * (len(labels) > 1)}"
+        n = None if self._selected is None else len(self._selected)
+        which = "all labeled markers" if n is None else f"{n} selected marker{'s' * (n > 1)}"
+        solved = sum(f["solved_frames"] for f in report.get("hand_solve", {}).values())
         self.report({"INFO"}, f"Filled {report['filled']} of {report['gaps']} gaps of {which} ({methods})"
-                              + (f"; left open: {left}" if left else ""))
+                              + (f"; left open: {left}" if left else "")
+                              + (f"; the hand solved again on {solved} changed frames" if solved else ""))
         return {"FINISHED"}
 
 

@@ -16,7 +16,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
 from ..blender.properties import LAYOUT_DEFAULT, _layouts
 from ..core.hands import SIDES
 from .common import panel_take, reviewed_panel_take
-from .modal import start_modal
+from .modal import JobModal, in_background, start_modal
 
 
 @dataclass
@@ -35,6 +35,7 @@ class SolveRequest:
     smooth_hz: float = 10.0
     share: float = 0.0  # of the work done, set as the solve goes
     naming: object = None  # the take's HandNaming (None: any built-in convention)
+    digests: dict | None = None  # per side, the frame digests of the markers solved (set by run)
 
     def run(self, say=None):
         """The :class:`~mocap_autolabel.core.solve.HandSolve` of a take labeled with plain names (one
@@ -55,7 +56,18 @@ class SolveRequest:
                           solve_options={"smooth_hz": self.smooth_hz})
         naming = None if self.naming is None else self.naming.template
         result = process_take(self.take, self.layout, LabelSettings(naming=naming), outputs, progress=progress)
+        self.digests = _digests(self.take, self.layout, self.naming)
         return result.rig()
+
+
+def _digests(take, layout, naming) -> dict:
+    """Per side, :func:`~..core.fill.frame_digests` of the markers a solve of ``take`` sees (the rig
+    keeps them: Fill Gaps reuses the solve while the labels give the same markers)."""
+    from ..core.fill import frame_digests
+    from ..core.hands import split_hands
+    from ..core.labeling import layout_markers
+
+    return {side: frame_digests(layout_markers(one, layout)) for side, one in split_hands(take, layout, naming)}
 
 
 def _stage_printer():
@@ -71,7 +83,7 @@ def _stage_printer():
     return say
 
 
-class MOCAPAL_OT_solve_hand(bpy.types.Operator):
+class MOCAPAL_OT_solve_hand(JobModal, bpy.types.Operator):
     """Fit the rigged hand to a labeled take: calibrate the performer (or reuse a calibration), solve every
     frame, and add the keyed armature with its markers to the scene"""
 
@@ -178,7 +190,8 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
             # "Hand" for the first take's rig, "<take>:Hand" beside another take's (never "Hand.001");
             # "Hand_L" / "Hand_R" for the hands of a two-hand take, as the command line names them.
             name = free_name(f"Hand_{side[0].upper()}" if side else "Hand", bpy.data.objects, base)
-            arm = build_solved_hand(one, collection, name=name, scale=request.scale)
+            arm = build_solved_hand(one, collection, name=name, scale=request.scale,
+                                    digests=(request.digests or {}).get(side), smooth_hz=request.smooth_hz)
             report = one.report()
             seconds = sum(one.seconds.values())
             said.append(f"{report['solved_frames']} of {report['frames']} frames in {seconds:.1f} s: marker RMS "
@@ -207,7 +220,7 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
             self.report({"ERROR"}, "No labeled take: label the imported take, select one of its markers, "
                                    "or give a labeled file")
             return {"CANCELLED"}
-        if self.in_background and context.window is not None and not bpy.app.background:
+        if self.in_background and in_background(context):
             return self._start(context, request)
         try:
             solved = request.run(_stage_printer() if bpy.app.background else None)
@@ -223,27 +236,14 @@ class MOCAPAL_OT_solve_hand(bpy.types.Operator):
         self._pending = request
         return start_modal(self, context, Job(request.run))
 
-    def modal(self, context, event):
-        job, request = self._job, self._pending
-        if event.type == "ESC" and event.value == "PRESS":
-            job.cancel()
-        if event.type != "TIMER":
-            return {"PASS_THROUGH"}
-        wm = context.window_manager
-        if not job.done:
-            context.workspace.status_text_set(f"Solving the hand of {request.source}: {job.message}, "
-                                              f"{100 * request.share:.0f} % ({job.elapsed:.1f} s) - Esc to cancel")
-            wm.progress_update(min(99, int(100 * request.share)))
-            return {"PASS_THROUGH"}
-        wm.event_timer_remove(self._timer)
-        wm.progress_end()
-        context.workspace.status_text_set(None)
-        if job.cancelled:
-            self.report({"WARNING"}, "Solve Hand cancelled; the scene is unchanged")
-            return {"CANCELLED"}
-        if job.error is not None:
-            return self._fail(job.error, request.source)
-        return self._finish(context, request, job.result)
+    def _progress(self, job) -> tuple[str, float]:
+        return f"Solving the hand of {self._pending.source}: {job.message}", self._pending.share
+
+    def _job_failed(self, exc: BaseException) -> set[str]:
+        return self._fail(exc, self._pending.source)
+
+    def _job_done(self, context, result) -> set[str]:
+        return self._finish(context, self._pending, result)
 
 
 classes = (MOCAPAL_OT_solve_hand,)
