@@ -72,6 +72,16 @@ class BatchSettings:
         fill: also fill the labeled markers' gaps in ``<name>.labeled.c3d`` (marked as computed),
             by ``fill_method`` (``auto``, ``spline``, ``rigid``, ``hand``, ``pca``, ``pose``), gaps up to
             ``max_gap`` seconds; the report's ``fill`` holds every gap.
+        retarget: ``"character.blend"`` or ``"character.blend:Armature"`` (relative to the TOML): the solved
+            hands retargeted onto that character's armature (``solve --retarget``); ``<name>.blend`` is the
+            character's scene with them, ``<name>.fbx`` / ``.bvh`` its armature (one file, both hands);
+            the report's ``retarget`` says onto what and how many bones and frames.
+        bone_map: with ``retarget``, a bone-map preset's name (saved from Blender) or a .json (relative to
+            the TOML); None: the automatic map.
+        retarget_wrist: ``fingers`` (default), ``rotation`` or ``world`` (see ``solve --retarget-wrist``).
+        pinch: keep the thumb-to-fingertip contacts when retargeting.
+        bone_names: the FBX/BVH bone names and the FBX's engine axes and units: ``ours`` (default),
+            ``ue5``, ``unity``, ``mixamo`` or ``rigify`` (see ``solve --bone-names``).
     """
 
     layout: str | None = None
@@ -94,6 +104,11 @@ class BatchSettings:
     fill: bool = False
     fill_method: str = "auto"
     max_gap: float = 1.0
+    retarget: str | None = None
+    bone_map: str | None = None
+    retarget_wrist: str = "fingers"
+    pinch: bool = False
+    bone_names: str = "ours"
     extra: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -120,6 +135,17 @@ class BatchSettings:
             data["hands"] = str(data["hands"])
         if str(data.get("layout", "")).endswith(".toml"):
             data["layout"] = os.path.join(base, data["layout"])
+        if data.get("retarget"):  # the character's path relative to the TOML, its ":Armature" kept
+            from .commands.solve import split_character
+
+            try:
+                blend, armature = split_character(str(data["retarget"]))
+            except ValueError as exc:
+                raise ValueError(f"{path}: {str(exc).replace('--retarget', 'retarget')}") from None
+            data["retarget"] = os.path.join(base, blend) + (f":{armature}" if armature else "")
+        bone_map = str(data.get("bone_map") or "")
+        if bone_map.lower().endswith(".json") or "/" in bone_map or os.sep in bone_map:  # a file, not a preset
+            data["bone_map"] = os.path.join(base, bone_map)
         return cls(**data)
 
     def outputs(self) -> list[str]:
@@ -130,6 +156,12 @@ class BatchSettings:
 
     def needs_blender(self) -> bool:
         return self.blend or self.fbx or self.bvh
+
+    def character(self) -> tuple[str, str | None] | None:
+        """``(character .blend, armature or None)`` of ``retarget``, or None."""
+        from .commands.solve import split_character
+
+        return split_character(self.retarget) if self.retarget else None
 
     def label_settings(self, **more) -> LabelSettings:
         """The :class:`.core.settings.LabelSettings` of these batch settings (``more``: fields to add)."""
@@ -249,6 +281,10 @@ def settings_digest(settings: BatchSettings) -> str:
     files = [p.strip() for key in ("model", "calibration") for p in (getattr(settings, key) or "").split(",")]
     if settings.layout and settings.layout.endswith(".toml"):
         files.append(settings.layout)
+    if settings.retarget:  # the character and the bone map shape the retargeted outputs: a changed one redoes them
+        files.append(settings.character()[0])
+        if settings.bone_map and os.path.isfile(settings.bone_map):
+            files.append(settings.bone_map)
     shipped = sorted(glob.glob(os.path.join(os.path.dirname(os.path.abspath(__file__)), "models", "*")))
     blob = json.dumps({"settings": shaping, "version": __version__,
                        "files": [_digest(p) for p in files if p], "shipped": [_digest(p) for p in shipped]},
@@ -541,7 +577,7 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
             from .core.process import as_rig
 
             rigs = as_rig(solved)
-            out["outputs"].update(_blender_outputs(labeled, rigs, os.path.join(out_dir, name), settings))
+            out["outputs"].update(_blender_outputs(labeled, rigs, os.path.join(out_dir, name), settings, out))
             timings["blender"] = round(time.perf_counter() - t, 4)
     if settings.html:
         t = time.perf_counter()
@@ -570,14 +606,26 @@ def _take_page(report: dict, labeling, first_frame: int, rms: list, sides: list[
         f.write(page)
 
 
-def _blender_outputs(take, solved, stem: str, settings: BatchSettings) -> dict:
-    from .blender.export import write_solved_scene
+def _blender_outputs(take, solved, stem: str, settings: BatchSettings, facts: dict | None = None) -> dict:
+    """The take's .blend, FBX and BVH (retargeted onto ``settings.retarget``'s character where given; its
+    facts then go in ``facts["retarget"]``): ``{kind: file name}``."""
+    from .blender.export import write_retargeted_scene, write_solved_scene
     from .core.quiet import silenced_stdout
 
     paths = {kind: stem + "." + kind if on else None
              for kind, on in (("blend", settings.blend), ("fbx", settings.fbx), ("bvh", settings.bvh))}
     with silenced_stdout():  # Blender's "Saved copy as .partial.blend" and the exporters' lines
-        written = write_solved_scene(take, solved, **paths)
+        if settings.retarget:
+            from .commands.solve import plain
+
+            character, armature = settings.character()
+            written, done = write_retargeted_scene(take, solved, character, armature=armature,
+                                                   bone_map=settings.bone_map, wrist=settings.retarget_wrist,
+                                                   pinch=settings.pinch, bone_names=settings.bone_names, **paths)
+            if facts is not None:
+                facts["retarget"] = plain(done)
+        else:
+            written = write_solved_scene(take, solved, bone_names=settings.bone_names, **paths)
     return {kind: os.path.basename(path) for kind, path in written.items()}
 
 
@@ -773,12 +821,21 @@ def _row(report: dict, skipped: bool) -> dict:
             "confident_share": round(summary["confident_share"], 4) if "confident_share" in summary else None,
             "uncertain_segments": len(summary.get("uncertain_segments", [])) if summary else None,
             "marker_rms_mm": hand.get("marker_rms_mm"),
+            "retarget": _retarget_cell(report.get("retarget")),
             "seconds": (report.get("seconds") or {}).get("total", 0.0),
             "page": report.get("name", "") + ".report.html" if "html" in report.get("outputs", {}) else None,
             # the take's files in the output folder, its report too: exactly what is on disk for it
             "outputs": sorted(os.path.join(os.path.dirname(report.get("name") or ""), f)
                               for f in [*(report.get("outputs") or {}).values(),
                                         os.path.basename(report.get("name") or "") + REPORT])}
+
+
+def _retarget_cell(facts: dict | None) -> str | None:
+    """A take's retargeting in the summary: ``Armature (left 16, right 16 bones)``, or None."""
+    if not isinstance(facts, dict):
+        return None
+    hands = ", ".join(f"{side} {len(f.get('bones', ()))}" for side, f in (facts.get("hands") or {}).items())
+    return f"{facts.get('armature')} ({hands} bones)" if hands else str(facts.get("armature"))
 
 
 def _write_summary(out_dir: str, summary: dict) -> None:
@@ -788,7 +845,7 @@ def _write_summary(out_dir: str, summary: dict) -> None:
         json.dump(summary, f, indent=1)
     buf = io.StringIO()
     cols = ["name", "status", "skipped", "frames", "hands", "sides", "confident_share", "uncertain_segments",
-            "marker_rms_mm", "seconds", "error", "warning", "file"]
+            "marker_rms_mm", "retarget", "seconds", "error", "warning", "file"]
     writer = csv.DictWriter(buf, cols, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(summary["takes_detail"])

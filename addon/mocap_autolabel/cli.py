@@ -36,7 +36,7 @@ if __package__:  # else run as a script (Blender's -P, or re-run by multiprocess
     from .commands.label import _label
     from .commands.layout import _layout
     from .commands.progress import _ProgressBar  # noqa: F401 (re-exported)
-    from .commands.solve import _solve
+    from .commands.solve import _retarget_arguments, _solve
     from .commands.synth import _synth
     from .commands.train import _train
 
@@ -168,6 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "ThumbTip_L, vicon LeftHand:ThumbTip); see label --hand-names")
     sol.add_argument("--smooth-hz", type=float, default=10.0, help="low-pass cut-off of the pose track (0: off)")
     sol.add_argument("--report", metavar="REPORT.json", help="per-frame and overall marker RMS (mm), calibration")
+    _retarget_arguments(sol)
     _progress_flags(sol)
 
     bat = sub.add_parser("batch", help="label (and solve) folders of takes headless, with progress and reports")
@@ -188,6 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="also write a .blend per take (solves the hand)")
     bat.add_argument("--fbx", action="store_true", default=None, help="also write an FBX per take (solves the hand)")
     bat.add_argument("--bvh", action="store_true", default=None, help="also write a BVH per take (solves the hand)")
+    _retarget_arguments(bat, batch=True)
     bat.add_argument("--fill", action="store_true", default=None,
                      help="also fill the labeled markers' gaps in the labeled C3D (marked as computed)")
     bat.add_argument("--fill-method", choices=FILL_METHODS, help="fill method (default auto)")

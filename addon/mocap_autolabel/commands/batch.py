@@ -19,7 +19,7 @@ def _batch(args) -> int:
         return EXIT_USAGE
     for key in ("layout", "model", "method", "temporal", "validate", "confident", "solve_hand", "calibration",
                 "blend", "fbx", "bvh", "jobs", "scheduler", "html", "force", "hands", "hand_names", "fill",
-                "fill_method", "max_gap"):
+                "fill_method", "max_gap", "retarget", "bone_map", "retarget_wrist", "pinch", "bone_names"):
         value = getattr(args, key)
         if value is not None:
             setattr(settings, key, value)
@@ -49,6 +49,10 @@ def _batch(args) -> int:
 
         print(f"error: {NO_MATPLOTLIB}", file=sys.stderr)
         return EXIT_FAILED
+    problem = _retarget_problem(settings)
+    if problem:
+        print(f"mocap_autolabel batch: error: {problem}", file=sys.stderr)
+        return EXIT_USAGE
     if settings.validate and not _allows_validation(settings.temporal):
         print("mocap_autolabel batch: error: --validate needs --temporal vote", file=sys.stderr)
         return EXIT_USAGE
@@ -66,6 +70,15 @@ def _batch(args) -> int:
             load_layout(settings.layout)
     except Exception as exc:
         return _fail(settings.layout, exc)
+    if settings.retarget:  # a bad character or bone map fails once, before any take
+        from ..blender.export import check_character
+        from ..core.quiet import silenced_stdout
+
+        try:
+            with silenced_stdout():  # Blender's "Read blend" line
+                check_character(*settings.character(), settings.bone_map)
+        except Exception as exc:
+            return _fail(settings.character()[0], exc)
     missing = [i for i in args.inputs if not any(ch in i for ch in "*?[") and not os.path.exists(i)]
     if missing:
         print(f"mocap_autolabel batch: error: no such file or folder: {', '.join(missing)}", file=sys.stderr)
@@ -88,3 +101,24 @@ def _batch(args) -> int:
     print(format_table(summary))
     print(f"  summary  {os.path.join(args.output, 'summary.csv')}, {os.path.join(args.output, 'summary.json')}")
     return EXIT_FAILED if summary["failed"] else EXIT_OK
+
+
+def _retarget_problem(settings) -> str | None:
+    """What is wrong with the batch's retarget and bone-name settings together, or None."""
+    from .solve import BONE_NAME_CHOICES, WRIST_CHOICES, split_character
+
+    if settings.bone_names not in BONE_NAME_CHOICES or settings.retarget_wrist not in WRIST_CHOICES:
+        return (f"bone_names must be one of {', '.join(BONE_NAME_CHOICES)} and retarget_wrist one of "
+                f"{', '.join(WRIST_CHOICES)}")
+    if settings.retarget:
+        try:
+            split_character(settings.retarget)
+        except ValueError as exc:
+            return str(exc).replace("--retarget", "retarget")
+        if not settings.needs_blender():
+            return "retarget needs blend, fbx or bvh (what to write per take)"
+    elif settings.bone_map or settings.pinch or settings.retarget_wrist != WRIST_CHOICES[0]:
+        return "bone_map, retarget_wrist and pinch are for retarget = \"CHARACTER.blend\""
+    if settings.bone_names != BONE_NAME_CHOICES[0] and not (settings.fbx or settings.bvh):
+        return "bone_names is for fbx and bvh"
+    return None

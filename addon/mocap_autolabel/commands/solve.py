@@ -1,11 +1,66 @@
-"""``solve``: the rigged hand fitted to a labeled take (calibration, IK), and the Blender, FBX and BVH outputs."""
+"""``solve``: the rigged hand fitted to a labeled take (calibration, IK), and the Blender, FBX and BVH outputs,
+also retargeted onto an animator's own character (``--retarget``), with engine bone names (``--bone-names``)."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, _bpy_or_none, _fail, _write_report
 from .progress import _ProgressBar
+
+#: ``--bone-names``: the presets of ``blender.export.BONE_NAME_PRESETS`` (spelled out: ``--help`` loads no bpy;
+#: a test keeps them equal).
+BONE_NAME_CHOICES = ("ours", "ue5", "unity", "mixamo", "rigify")
+#: ``--retarget-wrist``: ``core.retarget.transfer.WRIST_MODES``, the first the default.
+WRIST_CHOICES = ("fingers", "rotation", "world")
+
+
+def split_character(value: str) -> tuple[str, str | None]:
+    """``CHARACTER.blend[:ARMATURE]`` -> ``(path, armature or None)``; ValueError where no .blend is named."""
+    at = value.lower().rfind(".blend:")
+    path, armature = (value[:at + 6], value[at + 7:]) if at >= 0 else (value, None)
+    if not path.lower().endswith(".blend"):
+        raise ValueError(f"--retarget takes CHARACTER.blend or CHARACTER.blend:ARMATURE, got {value!r}")
+    return path, armature or None
+
+
+def _retarget_arguments(parser: argparse.ArgumentParser, batch: bool = False) -> None:
+    """``--retarget``, ``--bone-map``, ``--retarget-wrist``, ``--pinch`` and ``--bone-names`` of ``solve``
+    and ``batch`` (batch's default None: the TOML's value, else the default, stands)."""
+    parser.add_argument("--retarget", metavar="CHARACTER.blend[:ARMATURE]",
+                        help="retarget the solved hand(s) onto this character's armature (the one with hand bones, "
+                             "or the one named): "
+                             + ("its .blend per take" if batch else "--blend saves the character's scene with them")
+                             + ", --fbx and --bvh export its armature (its own bone names)")
+    parser.add_argument("--bone-map", metavar="PRESET|MAP.json",
+                        help="with --retarget: which bone is which (a preset saved from Blender's Retarget panel, "
+                             "or a .json); default: the automatic map (Rigify, Mixamo, UE5, Unity, generic names)")
+    parser.add_argument("--retarget-wrist", choices=WRIST_CHOICES, default=None if batch else WRIST_CHOICES[0],
+                        help="with --retarget: move the fingers only (default), also turn the hand bone (rotation), "
+                             "or also move it to our wrist (world)")
+    parser.add_argument("--pinch", action="store_true", default=None if batch else False,
+                        help="with --retarget: keep the thumb-to-fingertip contacts of the solved hand")
+    parser.add_argument("--bone-names", choices=BONE_NAME_CHOICES, default=None if batch else BONE_NAME_CHOICES[0],
+                        help="--fbx/--bvh bone names and the FBX's axes and units for an engine: ours (default; "
+                             "Y up, metres), ue5 (Z up, centimetres), unity, mixamo, rigify (Y up, metres); one "
+                             "animation stack, no leaf bones")
+
+
+def _retarget_usage(args) -> str | None:
+    """What is wrong with ``solve``'s retarget and export flags together, or None."""
+    if args.retarget:
+        try:
+            split_character(args.retarget)
+        except ValueError as exc:
+            return str(exc)
+        if not (args.blend or args.fbx or args.bvh):
+            return "--retarget needs --blend, --fbx or --bvh (what to write)"
+    elif args.bone_map or args.pinch or args.retarget_wrist != WRIST_CHOICES[0]:
+        return "--bone-map, --retarget-wrist and --pinch are for --retarget CHARACTER.blend"
+    if args.bone_names != BONE_NAME_CHOICES[0] and not (args.fbx or args.bvh):
+        return "--bone-names is for --fbx and --bvh"
+    return None
 
 
 def _solve(args) -> int:
@@ -22,6 +77,10 @@ def _solve(args) -> int:
         if value and not value.lower().endswith(ext):
             print(f"mocap_autolabel solve: error: {flag} must name a {ext} file, got {value!r}", file=sys.stderr)
             return EXIT_USAGE
+    problem = _retarget_usage(args)
+    if problem:
+        print(f"mocap_autolabel solve: error: {problem}", file=sys.stderr)
+        return EXIT_USAGE
     reference = None
     if args.reference_frames:
         try:
@@ -46,6 +105,17 @@ def _solve(args) -> int:
         bpy = _bpy_or_none("solve --blend/--fbx/--bvh")
         if bpy is None:
             return EXIT_FAILED
+    bone_map = None
+    if args.retarget:  # a bad character or bone map fails in a second, before the solve, not after it
+        from ..blender.export import check_character, load_bone_map
+        from ..core.quiet import silenced_stdout
+
+        try:
+            bone_map = load_bone_map(args.bone_map) if args.bone_map else None
+            with silenced_stdout():  # Blender's "Read blend" line
+                check_character(*split_character(args.retarget), bone_map)
+        except Exception as exc:
+            return _fail(args.file, exc)
     bar = _ProgressBar.for_args(args)
     try:
         layout = load_layout(args.layout) if args.layout else None
@@ -89,13 +159,24 @@ def _solve(args) -> int:
             cal.save(path)
             print(f"  calibration {path}")
     if bpy is not None:
-        from ..blender.export import write_solved_scene
+        from ..blender.export import write_retargeted_scene, write_solved_scene
         from ..core.quiet import silenced_stdout
 
         try:  # the labeled markers beside the calibrated, animated rig(s); then .blend, FBX and BVH
             rigs = solved if solved[0][0] else solved[0][1]
             with silenced_stdout():  # Blender's and the exporters' own lines name the temporary files
-                written = write_solved_scene(take, rigs, args.blend, args.fbx, args.bvh)
+                if args.retarget:
+                    character, armature = split_character(args.retarget)
+                    written, facts = write_retargeted_scene(
+                        take, rigs, character, armature=armature, bone_map=bone_map, wrist=args.retarget_wrist,
+                        pinch=args.pinch, blend=args.blend, fbx=args.fbx, bvh=args.bvh, bone_names=args.bone_names)
+                else:
+                    written = write_solved_scene(take, rigs, args.blend, args.fbx, args.bvh,
+                                                 bone_names=args.bone_names)
+            if args.retarget:
+                print(f"  retarget {retarget_line(facts)}")
+                for report in reports:
+                    report["retarget"] = plain(facts)
             for kind, path in written.items():
                 print(f"  {kind:8s} {path}")
         except Exception as exc:
@@ -106,3 +187,22 @@ def _solve(args) -> int:
         except OSError as exc:
             return _fail(args.file, exc)
     return EXIT_OK
+
+
+def retarget_line(facts: dict) -> str:
+    """One line on a retargeting (:func:`..blender.retarget.retarget_character`'s facts)."""
+    hands = "; ".join(f"{side} {len(f.get('bones', ()))} bones x {f.get('frames', 0)} frames"
+                      for side, f in (facts.get("hands") or {}).items())
+    return (f"onto {facts.get('armature')!r} ({facts.get('convention') or 'bone map'}): {hands}; action "
+            f"{facts.get('action')!r} on NLA track {facts.get('track')!r}")
+
+
+def plain(value):
+    """``value`` with numpy numbers and arrays as Python's (for JSON)."""
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy scalars and arrays
+        return value.tolist()
+    return value

@@ -1,0 +1,28 @@
+"""A stand-in for the animator's character, for the demo: Rigify's human meta-rig (bundled with
+Blender), saved as a .blend that ``solve --retarget`` keys the solved hand onto.
+
+    python samples/make_character.py out/character.blend
+"""
+
+from __future__ import annotations
+
+import sys
+
+
+def main(path: str) -> None:
+    import addon_utils  # Blender's own, importable once bpy is
+    import bpy
+    from mocap_autolabel.blender.export import save_blend
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    addon_utils.enable("rigify", default_set=True)
+    bpy.ops.object.armature_human_metarig_add()
+    bpy.context.active_object.name = "Character"
+    save_blend(path)
+    print(f"  character {path} (Rigify's human meta-rig, armature 'Character')")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit("usage: python samples/make_character.py OUT.blend")
+    main(sys.argv[1])
