@@ -1,9 +1,11 @@
-"""Write files so that they appear complete or not at all."""
+"""Write files so that they appear complete or not at all; write and read JSON documents that way, with
+one-line errors naming the file."""
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import json
 import os
 import secrets
 from collections.abc import Iterator
@@ -76,3 +78,25 @@ def _name(exc: OSError, path: str, tmp: str) -> None:
     user's output, not the hidden temporary name nor the input the caller was reading."""
     if exc.filename is None or exc.filename == tmp:
         exc.filename, exc.filename2 = path, None
+
+
+def write_json(path: str | os.PathLike, data) -> None:
+    """``data`` as indented JSON at ``path``, atomically."""
+    with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
+        json.dump(data, f, indent=1)
+        f.write("\n")
+
+
+def read_json(path: str | os.PathLike, what: str):
+    """The JSON document at ``path``; a missing or unreadable file is one :class:`.errors.MocapInputError`
+    naming it and ``what`` it should be (``"calibration"``, ``"bone map"``)."""
+    from .errors import MocapInputError
+
+    where = os.fspath(path)
+    try:
+        with open(where, encoding="utf-8") as f:
+            return json.load(f)
+    except FileNotFoundError:
+        raise MocapInputError(where, f"{what} file not found") from None
+    except (OSError, ValueError) as exc:
+        raise MocapInputError(where, f"not a readable {what} JSON ({exc})") from None

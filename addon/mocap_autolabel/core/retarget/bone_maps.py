@@ -33,14 +33,13 @@ order, e.g. Rigify's bare names, then ``DEF-``, then ``ORG-``). A generated Rigi
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from ..atomic import atomic_output
+from ..atomic import read_json, write_json
 from ..errors import MocapInputError
 from ..hand.skeleton import BONE_NAMES, DIGITS, FINGERS
 
@@ -725,22 +724,12 @@ class BoneMap:
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the map as a JSON preset, atomically (complete or not at all)."""
-        with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
-            json.dump(self.to_dict(), f, indent=1)
-            f.write("\n")
+        write_json(path, self.to_dict())
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> BoneMap:
         """Read a preset written by :meth:`save`; any problem is one :class:`MocapInputError` naming the file."""
-        where = os.fspath(path)
-        try:
-            with open(where, encoding="utf-8") as f:
-                data = json.load(f)
-        except FileNotFoundError:
-            raise MocapInputError(where, "bone map file not found") from None
-        except (OSError, ValueError) as exc:
-            raise MocapInputError(where, f"not a readable bone map JSON ({exc})") from None
-        return cls.from_dict(data, where)
+        return cls.from_dict(read_json(path, "bone map"), os.fspath(path))
 
 
 #: How many times more bones the generic name patterns must map than the best named convention to
