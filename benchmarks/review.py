@@ -1,10 +1,17 @@
-"""Review inside Blender: label + colour a take, edit, re-solve, save and reopen (bpy module).
+"""Review inside Blender: label + colour a take, edit, re-solve, save and reopen (bpy module); and the
+review queue: what a reviewer is shown, against the truth.
 
-    python benchmarks/review.py [--frames 10000] [--runs 3] [--hands 1|2]
+    python benchmarks/review.py [--frames 10000] [--runs 3] [--hands 1|2] [--queue-takes N] [--quick] [--queue-only]
 
 A synthetic raw han19 take (realistic corruption, 120 Hz; ``--hands 2``: two hands apart, as
 han2018's) is imported, labeled with the defaults (set + vote) by the Label operator, corrected with
-each relabel operator, and re-solved. Writes benchmarks/reports/review.md (two hands:
+each relabel operator, and re-solved. The review queue (``core.review.review_queue``, the panel's
+list, Previous / Next, the Timeline's marks and the HTML report) is measured against each take's truth
+(one hand: the demo take, this take and the temporal benchmark's raw han2018 takes; two hands: this
+take and interacting two-hand takes): how many entries it shows by default against the old list (every
+uncertain segment), how many of them are labeled or unlabeled pieces of at least 10 frames, and which
+wrong segments it holds. ``--quick``: 2,000 frames, one run, a few takes; ``--queue-only``: the queue's
+figures alone, the report's timings kept. Writes benchmarks/reports/review.md (two hands:
 review_two_hands.md).
 """
 
@@ -23,10 +30,157 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "addon"))
 from datasets import write_report  # noqa: E402
 from mocap_autolabel.core.formats.c3d import write_c3d  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
+from mocap_autolabel.core.metrics import segments_right  # noqa: E402
+from mocap_autolabel.core.review import QUEUE_MIN_FRAMES, review_queue, uncertain_segments  # noqa: E402
 from mocap_autolabel.core.synth.generate import synthesize  # noqa: E402
 from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take  # noqa: E402
 
 REPORT = os.path.join(os.path.dirname(__file__), "reports", "review.md")
+DEMO = os.path.join(os.path.dirname(__file__), "..", "samples", "demo_take.c3d")
+
+
+def queue_figures(labeling, take, truth) -> dict:
+    """One labeled take's review queue against its truth: the old list (every uncertain segment) and the
+    queue by default, the queue's entries that are labeled or unlabeled pieces of at least
+    ``QUEUE_MIN_FRAMES`` frames, and the wrong segments (not every sample carries its true label): all,
+    below the sure threshold, and in the queue (with the samples of each)."""
+    old = uncertain_segments(labeling)
+    queue = review_queue(labeling)
+    wrong = ~segments_right(labeling, truth, take.valid)
+    unsure = np.zeros(len(labeling), dtype=bool)
+    unsure[old] = True
+    queued = np.zeros(len(labeling), dtype=bool)
+    queued[queue] = True
+    labeled = labeling.label >= 0
+    length = labeling.length
+    missed = wrong & unsure & ~queued
+    # A left-out wrong piece whose true label no trajectory carries in any of its frames: a gap in that marker.
+    per = labeling.per_sample()
+    gap = 0
+    for i in np.flatnonzero(missed):
+        rows = np.arange(labeling.start[i], labeling.stop[i])
+        true = truth[rows, labeling.slot[i]]
+        ok = take.valid[rows, labeling.slot[i]] & (true >= 0)
+        gap += bool(ok.any() and all((per[r] != t).all() for r, t in zip(rows[ok], true[ok])))
+    return {"takes": 1, "old": len(old), "queue": len(queue),
+            "queue_labeled": int(labeled[queue].sum()),
+            "queue_long": int((~labeled[queue] & (length[queue] >= QUEUE_MIN_FRAMES)).sum()),
+            "wrong": int(wrong.sum()), "wrong_unsure": int((wrong & unsure).sum()),
+            "wrong_queued": int((wrong & queued).sum()),
+            "wrong_labeled": int((wrong & unsure & labeled).sum()),
+            "wrong_labeled_queued": int((wrong & queued & labeled).sum()),
+            "wrong_samples": int(length[wrong & unsure].sum()),
+            "wrong_samples_queued": int(length[wrong & queued].sum()),
+            "missed_lengths": sorted(int(v) for v in length[missed]),
+            "missed_labeled": int((missed & labeled).sum()), "missed_gaps": gap}
+
+
+def add_figures(total: dict | None, one: dict) -> dict:
+    if total is None:
+        return dict(one)
+    return {k: total[k] + v for k, v in one.items()}
+
+
+def queue_sets(hands: int, frames: int, quick: bool, queue_takes: int | None) -> dict[str, dict]:
+    """The review queue on each set of takes (see :func:`queue_figures`), labeled by the core as the Label
+    operator labels (set + vote, defaults)."""
+    from mocap_autolabel.core.pipeline import label_take
+    from mocap_autolabel.core.synth.generate import load_truth, truth_path
+    from mocap_autolabel.core.take import read_take
+
+    layout = load_layout("han19")
+    sets: dict[str, dict] = {}
+
+    def run(name: str, take, truth) -> None:
+        sets[name] = add_figures(sets.get(name), queue_figures(label_take(take, layout), take, truth))
+        print(f"queue {name}: {sets[name]['takes']} takes, {sets[name]['queue']} entries "
+              f"(old list {sets[name]['old']})", flush=True)
+
+    if hands == 1:
+        demo = read_take(DEMO)
+        run("the demo take (samples/demo_take.c3d)", demo, load_truth(truth_path(DEMO))["labels"])
+        synth = synthesize(layout, frames, seed=11)
+        run(f"this benchmark's take ({frames:,} frames)", synth.take, synth.labels)
+        from datasets import HAN2018
+
+        if os.path.isdir(HAN2018):
+            from temporal import han_cases
+
+            for case in han_cases(layout, 2 if quick else queue_takes):
+                run("the temporal benchmark's raw han2018 takes", case.take, case.truth)
+    else:
+        two = two_hand_take(layout, frames, seed=11, config=TwoHandConfig(close_share=0.0))
+        run(f"this benchmark's take (two hands apart, {frames:,} frames)", two.take, two.labels)
+        for seed in range(2 if quick else 8):  # as benchmarks/two_hands.py's synthetic takes
+            two = two_hand_take(layout, 1200, seed)
+            run("two hands interacting (1,200 frames, seeds 0-7)", two.take, two.labels)
+    return sets
+
+
+def benchmark_take(hands: int, frames: int):
+    layout = load_layout("han19")
+    return synthesize(layout, frames, seed=11).take if hands == 1 else \
+        two_hand_take(layout, frames, seed=11, config=TwoHandConfig(close_share=0.0)).take
+
+
+def panel_list(hands: int, frames: int) -> tuple[int, int, int]:
+    """The Review panel's list after the Label operator labeled this benchmark's take: its length, the
+    queue's and the count of uncertain segments."""
+    import bpy  # noqa: I001 (bpy first: it puts addon_utils on the path)
+    import addon_utils
+
+    addon_utils.enable("mocap_autolabel", default_set=True)
+    from mocap_autolabel.blender.review import load_state
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "take.c3d")
+        write_c3d(benchmark_take(hands, frames), path)
+        bpy.ops.wm.read_homefile(use_empty=True)
+        assert bpy.ops.mocap_autolabel.import_markers(filepath=path) == {"FINISHED"}
+        settings = bpy.context.scene.mocap_autolabel
+        settings.layout = "han19"
+        assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+        lab = load_state(settings.take).labeling
+        return settings.uncertain_total, len(review_queue(lab)), len(uncertain_segments(lab))
+
+
+def list_line(listed: tuple[int, int, int]) -> list[str]:
+    return ["", f"In Blender, the panel's list after labeling this take held {listed[0]:,} entries, the queue's "
+            f"{listed[1]:,} (of {listed[2]:,} uncertain segments)."]
+
+
+def queue_lines(sets: dict[str, dict], hands: int) -> list[str]:
+    lines = ["", "## The review queue", "",
+             "What the panel's list, Previous / Next, the Timeline's marks and the HTML report show by default "
+             "(`core/review.py: review_queue`): every labeled segment below Confident at (0.95), least confident "
+             "then shortest first; then the unlabeled pieces that may be a marker: at least "
+             f"{QUEUE_MIN_FRAMES} frames long, or continuing a labeled segment in doubt on the same trajectory, "
+             "or more likely a marker than not. The old list held every uncertain segment. Wrong: a segment "
+             "not every sample of which carries its true label (`core/metrics.py: segments_right`); "
+             "'in doubt': below 0.95 (a wrong segment at 0.95 or more is in neither list).", "",
+             "| takes | old list | queue | labeled or >= 10 frames | wrong in doubt | of them in the queue | "
+             "wrong labeled in the queue | wrong samples in the queue | left out (frames each) | of them gaps |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, f in sets.items():
+        share = (f["queue_labeled"] + f["queue_long"]) / max(f["queue"], 1)
+        missed = ", ".join(str(v) for v in f["missed_lengths"]) or "none"
+        lines.append(f"| {name} ({f['takes']}) | {f['old']:,} | {f['queue']:,} | {100 * share:.1f} % | "
+                     f"{f['wrong_unsure']} (of {f['wrong']} wrong) | {f['wrong_queued']} | "
+                     f"{f['wrong_labeled_queued']} of {f['wrong_labeled']} | "
+                     f"{f['wrong_samples_queued']:,} of {f['wrong_samples']:,} | {missed} | {f['missed_gaps']} |")
+    shares = [(f["queue_labeled"] + f["queue_long"]) / max(f["queue"], 1) for f in sets.values()]
+    left = sum(f["wrong_unsure"] - f["wrong_queued"] for f in sets.values())
+    unlabeled = sum(f["wrong_unsure"] - f["wrong_labeled"] for f in sets.values())
+    lines += ["", f"Bars (issue 48): at least 90 % of the entries labeled or >= 10 frames: "
+              f"{'met' if min(shares) >= 0.9 else 'NOT met'} (lowest {100 * min(shares):.1f} %); every wrong "
+              f"segment in doubt in the queue: {'met' if not left else 'met for the labeled ones, not for'} "
+              + (f"{left} of the {unlabeled} wrong unlabeled pieces." if left else "(all of them).")]
+    lines += ["", "Every labeled segment in doubt is in the queue, the wrong ones with them. What it leaves out "
+              "by default are unlabeled pieces of 1-9 frames: where one was a marker's samples, that marker "
+              "lacks them (\"of them gaps\": no trajectory carries the marker's label in those frames; the "
+              "Timeline's marks count such missing labels, and gap filling fills them). Unlabeled From 1 (the "
+              "panel) or `min_frames=1` shows every uncertain piece, as the old list did."]
+    return lines
 
 
 def timed(op, **kwargs) -> float:
@@ -66,7 +220,22 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=10000)
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--hands", type=int, choices=(1, 2), default=1)
+    parser.add_argument("--queue-takes", type=int, default=None,
+                        help="raw han2018 takes per user for the queue's figures (default: all, as temporal.py)")
+    parser.add_argument("--quick", action="store_true", help="2,000 frames, one run, a few takes for the queue")
+    parser.add_argument("--queue-only", action="store_true",
+                        help="measure the review queue alone (and the panel's list once): the report's timings "
+                             "stay as they were")
     args = parser.parse_args()
+    if args.quick:
+        args.frames, args.runs = min(args.frames, 2000), 1
+    report = REPORT if args.hands == 1 else REPORT.replace("review.md", "review_two_hands.md")
+    sets = queue_sets(args.hands, args.frames, args.quick, args.queue_takes)
+    if args.queue_only:
+        with open(report, encoding="utf-8") as f:
+            kept = f.read().split("\n## The review queue\n")[0].rstrip("\n").split("\n")
+        write_report(report, kept + queue_lines(sets, args.hands) + list_line(panel_list(args.hands, args.frames)))
+        return
 
     import bpy  # noqa: I001 (bpy first: it puts addon_utils on the path)
     import addon_utils
@@ -75,7 +244,6 @@ def main() -> None:
     from mocap_autolabel.blender.review import load_state
     from mocap_autolabel.blender.session import forget_all
 
-    layout = load_layout("han19")
     rows: dict[str, list[float]] = {}
     progress: dict = {}
 
@@ -85,9 +253,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "take.c3d")
-        take = synthesize(layout, args.frames, seed=11).take if args.hands == 1 else \
-            two_hand_take(layout, args.frames, seed=11, config=TwoHandConfig(close_share=0.0)).take
-        write_c3d(take, path)
+        write_c3d(benchmark_take(args.hands, args.frames), path)
         for run in range(args.runs):
             bpy.ops.wm.read_homefile(use_empty=True)
             forget_all()
@@ -98,6 +264,7 @@ def main() -> None:
                  timed(bpy.ops.mocap_autolabel.label))
             coll = scene.mocap_autolabel.take
             lab = load_state(coll).labeling
+            listed = (scene.mocap_autolabel.uncertain_total, len(review_queue(lab)), len(uncertain_segments(lab)))
             labeled = {int(o["mocap_label"]): o for o in coll.all_objects if "mocap_label" in o}
             prefix = "" if args.hands == 1 else "L_"
             a, b = lab.names.index(prefix + "IndexTip"), lab.names.index(prefix + "MiddleTip")
@@ -171,7 +338,7 @@ def main() -> None:
                   f"{progress['updates']} progress reports, the longest {progress['longest_gap']:.1f} s apart "
                   f"(the most Esc can wait), shares rising from {progress['first']:.2f} to {progress['last']:.2f}; "
                   f"marker RMS {progress['rms_mm']:.2f} mm."]
-    write_report(REPORT if args.hands == 1 else REPORT.replace("review.md", "review_two_hands.md"), lines)
+    write_report(report, lines + queue_lines(sets, args.hands) + list_line(listed))
 
 
 if __name__ == "__main__":

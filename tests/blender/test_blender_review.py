@@ -8,7 +8,14 @@ from helpers import save_and_reopen
 from mocap_autolabel.core.formats.c3d import write_c3d
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint
 from mocap_autolabel.core.layout import load_layout
-from mocap_autolabel.core.review import KEY_TYPES, LOCKED, marker_classes, segment_classes, uncertain_segments
+from mocap_autolabel.core.review import (
+    KEY_TYPES,
+    LOCKED,
+    marker_classes,
+    review_queue,
+    segment_classes,
+    uncertain_segments,
+)
 from mocap_autolabel.core.synth.generate import synthesize
 
 FRAMES = 600
@@ -73,7 +80,11 @@ def assert_scene_shows(coll, labeling):
         np.testing.assert_array_equal(got, types[classes[idx, label]], err_msg=labeling.names[label])
         _, x = animio.read_keys(animio.find_fcurve(obj, "location", 0))
         np.testing.assert_allclose(x, take.positions[idx, slots, 0], atol=1e-6)
-    seg_class = labeling._paint(segment_classes(labeling), -1, np.int8)  # computed here, not by null_classes
+    # Computed here, not by null_classes: an unlabeled piece the review queue leaves out is keyed confident.
+    seg_class = segment_classes(labeling)
+    queued = np.isin(np.arange(len(labeling)), review_queue(labeling))
+    seg_class[(labeling.label < 0) & ~queued & (seg_class != LOCKED)] = KEY_TYPES.index("KEYFRAME")
+    seg_class = labeling._paint(seg_class, -1, np.int8)
     for obj in coll["mocap_unlabeled"].objects:
         slot = int(obj["mocap_null"])
         frames, got = key_types(obj)
@@ -96,14 +107,28 @@ def test_label_writes_collections_key_types_and_list(labeled):
     from mocap_autolabel.blender import animio
 
     assert animio.find_fcurve(obj, "location", 0).group.color_set == "THEME02"
-    # The uncertain list is the Labeling's uncertain segments, worst first; unlabeled ones under their
-    # *N empty's name.
-    items = bpy.context.scene.mocap_autolabel.uncertain
-    expected = uncertain_segments(lab)
-    assert len(items) == len(expected) > 0 and (lab.label[expected] < 0).any()
-    assert [(i.slot, i.frame_start - 1, i.label) for i in items] == \
-        [(int(lab.slot[s]), int(lab.start[s]), lab.names[lab.label[s]] if lab.label[s] >= 0 else f"*{lab.slot[s]}")
-         for s in expected]
+    # The list is the Labeling's review queue, what to look at first on top; unlabeled ones under their
+    # *N empty's name, every entry with its raw trajectory's.
+    settings = bpy.context.scene.mocap_autolabel
+    items = settings.uncertain
+
+    def listed():
+        return [(i.slot, i.frame_start - 1, i.label, i.point, i.unlabeled) for i in items]
+
+    def queued(**filters):
+        return [(int(lab.slot[s]), int(lab.start[s]), _shown_as(lab, s), f"*{lab.slot[s]}", bool(lab.label[s] < 0))
+                for s in review_queue(lab, **filters)]
+
+    assert listed() == queued() and len(items) == settings.uncertain_total > 0
+    assert settings.uncertain_hidden == len(uncertain_segments(lab)) - len(items)
+    # The filters: every uncertain unlabeled piece from 1 frame on, or labeled segments alone.
+    settings.queue_min_frames = 1
+    assert listed() == queued(min_frames=1) and (lab.label[review_queue(lab, min_frames=1)] < 0).any()
+    assert settings.uncertain_total == len(uncertain_segments(lab)) and settings.uncertain_hidden == 0
+    settings.queue_labeled_only = True
+    assert listed() == queued(labeled_only=True) and not any(i.unlabeled for i in items)
+    settings.queue_labeled_only, settings.queue_min_frames = False, 10
+    assert listed() == queued()
 
 
 def _slot_and_segment(lab, label, frame):
@@ -252,7 +277,7 @@ def test_save_reopen_keeps_the_review(labeled, tmp_path):
     for key in ("slot", "start", "stop", "label", "locked"):
         np.testing.assert_array_equal(getattr(after.labeling, key), getattr(before.labeling, key))
     np.testing.assert_allclose(after.labeling.confidence, before.labeling.confidence, atol=1e-6)
-    assert len(bpy.context.scene.mocap_autolabel.uncertain) == len(uncertain_segments(after.labeling))
+    assert len(bpy.context.scene.mocap_autolabel.uncertain) == len(review_queue(after.labeling))
     # The review goes on without the source file: the take is read back from the scene.
     import os
 
@@ -268,7 +293,7 @@ def test_next_previous_and_jump(labeled):
     bpy, coll = labeled
     lab = state(coll).labeling
     scene = bpy.context.scene
-    unsure = uncertain_segments(lab)
+    unsure = review_queue(lab)
     starts = np.sort(lab.start[unsure])
     scene.frame_set(1)
     assert bpy.ops.mocap_autolabel.next_uncertain() == {"FINISHED"}
@@ -468,7 +493,7 @@ def test_cli_label_writes_a_review_scene_the_panel_adopts(empty_scene, bpy_modul
     coll = settings.take
     assert coll is not None and coll["mocap_source"] == str(take_file)
     lab = state(coll).labeling
-    assert len(settings.uncertain) == len(uncertain_segments(lab))
+    assert len(settings.uncertain) == len(review_queue(lab))
     assert_scene_shows(coll, lab)
     assert any(o.type == "ARMATURE" for o in bpy.data.collections["Hand"].all_objects)
     assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}

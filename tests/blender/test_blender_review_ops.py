@@ -15,7 +15,7 @@ from helpers import select as _select
 from mocap_autolabel.core.formats.c3d import write_c3d
 from mocap_autolabel.core.labeling import EMPTY, NULL
 from mocap_autolabel.core.layout import load_layout
-from mocap_autolabel.core.review import KEY_TYPES, marker_classes, uncertain_segments
+from mocap_autolabel.core.review import KEY_TYPES, marker_classes, review_queue, uncertain_segments
 from mocap_autolabel.core.synth.generate import synthesize
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -148,7 +148,7 @@ def test_the_issue_scenario_on_the_real_glove_recording(empty_scene, bpy_module,
     assert after.layout == "han19" and after.review.constraints == before.review.constraints
 
 
-# --- bug 5: Previous / Next reach every uncertain segment ------------------------------------
+# --- bug 5: Previous / Next reach every segment of the review queue ---------------------------
 
 def _walk(bpy, previous):
     scene = bpy.context.scene
@@ -166,22 +166,32 @@ def _walk(bpy, previous):
     return seen
 
 
+def _in_time_order(lab, queue, first: int) -> list[tuple[int, int]]:
+    order = queue[np.lexsort((lab.slot[queue], lab.start[queue]))]
+    return [(int(lab.start[s]) + first, int(lab.label[s])) for s in order]
+
+
 def test_previous_and_next_visit_every_uncertain_segment_in_time_order(empty_scene, bpy_module, tmp_path):
-    """The demo take's uncertain segments (labeled and unlabeled), some starting on frame 1 and
+    """The demo take's review queue (labeled and unlabeled segments), some starting on frame 1 and
     several on one frame: Next from frame 1 and Previous from the end each visit all of them, once,
-    in time order."""
+    in time order; with the panel's filters, the entries the list shows."""
     bpy = bpy_module
     coll = _import(bpy, DEMO, tmp_path)
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     lab = state(coll).labeling
-    unsure = uncertain_segments(lab, bpy.context.scene.mocap_autolabel.sure)
-    order = unsure[np.lexsort((lab.slot[unsure], lab.start[unsure]))]
-    expected = [(int(lab.start[s]) + 1, int(lab.label[s])) for s in order]
+    settings = bpy.context.scene.mocap_autolabel
+    expected = _in_time_order(lab, review_queue(lab, settings.sure), 1)
     assert len(expected) >= 2 and len({f for f, _ in expected}) < len(expected)  # a shared start frame
+    assert any(label < 0 for _, label in expected) and len(expected) < len(uncertain_segments(lab, settings.sure))
     bpy.context.scene.frame_set(1)
     assert _walk(bpy, previous=False) == expected
     bpy.context.scene.frame_set(lab.n_frames)
     assert _walk(bpy, previous=True) == expected[::-1]
+    settings.queue_labeled_only = True
+    labeled = _in_time_order(lab, review_queue(lab, settings.sure, labeled_only=True), 1)
+    assert labeled == [e for e in expected if e[1] >= 0]
+    bpy.context.scene.frame_set(lab.n_frames)
+    assert _walk(bpy, previous=True) == labeled[::-1]
 
 
 def test_next_and_previous_walk_the_whole_take_imported_from_frame_0(empty_scene, bpy_module, take_files):
@@ -197,9 +207,7 @@ def test_next_and_previous_walk_the_whole_take_imported_from_frame_0(empty_scene
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
     lab = state(coll).labeling
     scene = bpy.context.scene
-    unsure = uncertain_segments(lab, scene.mocap_autolabel.sure)
-    order = unsure[np.lexsort((lab.slot[unsure], lab.start[unsure]))]
-    expected = [(int(lab.start[s]), int(lab.label[s])) for s in order]  # sample 0 is frame 0
+    expected = _in_time_order(lab, review_queue(lab, scene.mocap_autolabel.sure), 0)  # sample 0 is frame 0
     assert (scene.frame_start, scene.frame_end) == (0, lab.n_frames - 1) and expected[0][0] == 0
     scene.frame_set(scene.frame_start)
     assert _walk(bpy, previous=False) == expected
@@ -219,9 +227,10 @@ def test_confident_at_refreshes_list_counts_and_key_colours(labeled):
     types = key_type_values()
     for sure in (0.9, 0.999, 0.95):
         settings.sure = sure
-        expected = uncertain_segments(lab, settings.sure)
+        expected = review_queue(lab, settings.sure)
         assert len(settings.uncertain) == settings.uncertain_total == len(expected)
-        assert summary(lab, settings.sure)["uncertain"] == len(expected)
+        assert summary(lab, settings.sure)["uncertain"] == len(uncertain_segments(lab, settings.sure)) == \
+            len(expected) + settings.uncertain_hidden
         assert [(i.slot, i.frame_start - 1) for i in settings.uncertain] == \
             [(int(lab.slot[s]), int(lab.start[s])) for s in expected]
         classes = marker_classes(lab, settings.sure)

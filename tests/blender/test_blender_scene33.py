@@ -213,7 +213,15 @@ def test_uncertain_counts_agree_with_the_cli_and_unlabeled_ones_are_reviewable(e
     report = tmp_path / "report.json"
     assert main(["label", str(take_file), "--layout", "han19", "--report", str(report)]) == 0
     cli = json.loads(report.read_text())["summary"]["uncertain_segments"]
-    assert settings.uncertain_total == len(cli) == len(lab.summary(settings.sure)["uncertain_segments"])
+    assert settings.uncertain_total + settings.uncertain_hidden == len(cli) == \
+        len(lab.summary(settings.sure)["uncertain_segments"])
+    # The panel lists the review queue (issue 48), as the report's page ranks the report's segments.
+    from mocap_autolabel.core.review import queue_entries
+
+    assert [(i.slot, i.frame_start) for i in settings.uncertain] == \
+        [(s["slot"], s["frame_start"]) for s in queue_entries(cli)]
+    settings.queue_min_frames = 1  # every uncertain unlabeled piece, however short
+    assert settings.uncertain_total == len(cli)
     nulls = [i for i, item in enumerate(settings.uncertain) if item.label.startswith("*")]
     assert nulls, "an uncertain unlabeled segment must be in the list"
     item = settings.uncertain[nulls[0]]

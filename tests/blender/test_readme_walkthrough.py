@@ -17,7 +17,7 @@ from helpers import review_state as _state
 from helpers import select as _select
 from mocap_autolabel.core.labeling import EMPTY, NULL, unlabeled_point_names
 from mocap_autolabel.core.layout import load_layout
-from mocap_autolabel.core.review import KEY_TYPES, marker_classes, null_classes, uncertain_segments
+from mocap_autolabel.core.review import KEY_TYPES, marker_classes, null_classes, review_queue, uncertain_segments
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "samples" / "demo_take.c3d"
@@ -79,7 +79,7 @@ def _walk(bpy, previous):
 def _expected_walk(coll, lab, sure):
     from mocap_autolabel.blender.review import first_frame, object_for
 
-    unsure = uncertain_segments(lab, sure)
+    unsure = review_queue(lab, sure)
     order = unsure[np.lexsort((lab.slot[unsure], lab.start[unsure]))]
     return [(int(lab.start[s]) + first_frame(coll), object_for(coll, lab, int(s)).name) for s in order]
 
@@ -151,17 +151,19 @@ def _steps_1_to_8(empty_scene, bpy, tmp_path, capfd):
     for sure in (0.999, 0.95):
         settings.sure = sure
         _assert_keys_show(coll, lab, sure)
-        assert settings.uncertain_total == len(settings.uncertain) == len(uncertain_segments(lab, sure))
+        assert settings.uncertain_total == len(settings.uncertain) == len(review_queue(lab, sure))
     assert len(uncertain_segments(lab, 0.999)) > len(uncertain_segments(lab, 0.95))
     assert KEY_TYPES == ("KEYFRAME", "BREAKDOWN", "EXTREME", "JITTER")  # confident, uncertain, very, locked
 
     # --- 5. Go through what is uncertain: the list (worst first, labeled and unlabeled), a click
     # jumps with the marker selected, the Timeline's markers, Worst Frames, Previous / Next.
-    unsure = uncertain_segments(lab, settings.sure)
+    unsure = review_queue(lab, settings.sure)
     first = first_frame(coll)
     assert len(settings.uncertain) == len(unsure) > 0
-    conf = [i.confidence for i in settings.uncertain]
-    assert conf == sorted(conf)  # worst first
+    kinds = [i.unlabeled for i in settings.uncertain]
+    assert kinds == sorted(kinds)  # labeled segments in doubt first, then unlabeled pieces
+    conf = [i.confidence for i in settings.uncertain if not i.unlabeled]
+    assert conf == sorted(conf)  # the least confident first
     labels = {i.label for i in settings.uncertain}
     assert labels & set(layout.names) and any(n.startswith("*") for n in labels)  # labeled and unlabeled ones
     for k in (0, len(settings.uncertain) - 1):
@@ -301,7 +303,7 @@ def _steps_1_to_8(empty_scene, bpy, tmp_path, capfd):
     reopened = _state(coll)
     assert reopened.review.constraints == after.review.constraints and reopened.review.splits == after.review.splits
     np.testing.assert_array_equal(reopened.labeling.per_sample(), after.labeling.per_sample())
-    assert len(settings.uncertain) == len(uncertain_segments(reopened.labeling, settings.sure))
+    assert len(settings.uncertain) == len(review_queue(reopened.labeling, settings.sure))
     assert len(settings.corrections) == len(after.review.constraints) + len(after.review.splits)
     # Continue: Next and a correction after reopening, then a re-solve from the scene alone.
     scene.frame_set(first)

@@ -1,8 +1,9 @@
-"""The panel's lists of a take's review: its uncertain segments (worst first) and its corrections.
+"""The panel's lists of a take's review: its review queue (what to look at, in that order) and its corrections.
 
 Both live in the scene's settings (``scene.mocap_autolabel``, :mod:`.properties`) so that the
 panel's UILists can show them and undo restores them; they are derived from the take's stored
-labeling and review (:mod:`.takes`) and rebuilt after every change (and when Confident at changes).
+labeling and review (:mod:`.takes`) and rebuilt after every change (and when Confident at or the
+queue's filters change).
 """
 
 from __future__ import annotations
@@ -10,34 +11,43 @@ from __future__ import annotations
 import bpy
 
 from ..core.labeling import NULL, unlabeled_point_names
-from ..core.review import describe, uncertain_segments
+from ..core.review import describe, review_queue, uncertain_segments
 from .takes import current_take, first_frame, load_state, trajectory_names
 from .timeline import mark_bad_frames
 
-#: How many uncertain segments the list holds at most (worst first).
+#: How many segments the list holds at most (the first of the queue).
 LIST_LIMIT = 1000
 
 
+def queue_filters(settings) -> dict:
+    """The review queue's filters as the panel sets them (keyword arguments of ``core.review.review_queue``)."""
+    return {"labeled_only": bool(settings.queue_labeled_only), "min_frames": int(settings.queue_min_frames)}
+
+
 def refresh_uncertain(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling) -> None:
-    """Rebuild the scene's list of uncertain segments (worst first) from a labeling: labeled ones, and
-    unlabeled ones (possible missed markers) under their unlabeled empty's point name (``*N``); and
-    the list of the take's corrections."""
+    """Rebuild the scene's list of the take's review queue (``core.review.review_queue`` at the panel's
+    Confident at and filters: labeled segments in doubt first, then unlabeled pieces that may be a
+    marker), each under its empty's name and its raw trajectory's (``*N``); the count of uncertain
+    segments the filters leave out; the Timeline's marks; and the list of the take's corrections."""
     settings = scene.mocap_autolabel
     first = first_frame(take_coll)
-    idx = uncertain_segments(labeling, settings.sure)
-    points = unlabeled_point_names(current_take(take_coll).names, labeling.names) \
-        if (labeling.label[idx] < 0).any() else None
+    filters = queue_filters(settings)
+    idx = review_queue(labeling, settings.sure, **filters)
+    points = unlabeled_point_names(current_take(take_coll).names, labeling.names) if len(idx) else []
     items = settings.uncertain
     items.clear()
     for i in idx[:LIST_LIMIT]:
         item = items.add()
-        item.label = labeling.names[labeling.label[i]] if labeling.label[i] >= 0 else points[labeling.slot[i]]
+        item.point = points[labeling.slot[i]]
+        item.label = labeling.names[labeling.label[i]] if labeling.label[i] >= 0 else item.point
+        item.unlabeled = bool(labeling.label[i] < 0)
         item.slot = int(labeling.slot[i])
         item.frame_start = int(labeling.start[i]) + first
         item.frame_end = int(labeling.stop[i]) - 1 + first
         item.confidence = float(labeling.confidence[i])
     settings.uncertain_total = len(idx)
-    mark_bad_frames(scene, take_coll, labeling, settings.sure)  # the Timeline's overview follows the list
+    settings.uncertain_hidden = len(uncertain_segments(labeling, settings.sure)) - len(idx)
+    mark_bad_frames(scene, take_coll, labeling, settings.sure, **filters)  # the Timeline follows the queue
     # Writing the index directly would jump; the property's raw storage does not call the update.
     settings["uncertain_index"] = -1
     refresh_corrections(scene, take_coll, labeling)

@@ -3,9 +3,10 @@ its list of corrections; and the Retarget panel's character, editable bone map a
 (``scene.mocap_autolabel.retarget``, filled by ``retarget.py``).
 
 The lists are derived from the take's stored labeling and review (``takes.py``) and rebuilt
-after every change (and when Confident at changes) by ``lists.py``; they live in the scene so that the
-panel's UILists can show them and undo restores them. The settings' updates rewrite the take's keys
-(``review.recolor``): this module sits above ``review.py``, which never imports it.
+after every change (and when Confident at or the review queue's filters change) by ``lists.py``;
+they live in the scene so that the panel's UILists can show them and undo restores them. The
+settings' updates rewrite the take's keys (``review.recolor``): this module sits above ``review.py``,
+which never imports it.
 """
 
 from __future__ import annotations
@@ -22,7 +23,9 @@ from bpy.props import (
 )
 
 from ..core.layout import DEFAULT_LAYOUT, builtin_layouts
-from ..core.review import SURE
+from ..core.review import QUEUE_MIN_FRAMES, SURE
+from .cleanup_settings import MOCAPAL_PG_cleanup
+from .cleanup_settings import classes as cleanup_classes
 from .lists import refresh_uncertain
 from .review import recolor
 from .takes import has_review, load_state, take_collection
@@ -102,7 +105,7 @@ def _take_changed(self, context):
     else:
         self.uncertain.clear()
         self.corrections.clear()
-        self.uncertain_total = 0
+        self.uncertain_total = self.uncertain_hidden = 0
 
 
 #: The take's custom property holding the layout last in the panel's Layout field while the take was
@@ -154,10 +157,20 @@ def _sure_changed(self, context):
         refresh_uncertain(self.id_data, coll, load_state(coll).labeling)
 
 
-class MOCAPAL_PG_uncertain(bpy.types.PropertyGroup):
-    """One uncertain segment: a label on a tracklet over a frame range, and its confidence."""
+def _queue_changed(self, context):
+    """A filter of the review queue changed: the list, its counts and the Timeline's marks follow it."""
+    coll = self.take
+    if coll is not None and has_review(coll):
+        refresh_uncertain(self.id_data, coll, load_state(coll).labeling)
 
-    label: StringProperty(name="Label")
+
+class MOCAPAL_PG_uncertain(bpy.types.PropertyGroup):
+    """One segment of the review queue: a label (or none) on a raw trajectory over a frame range, and its
+    confidence (of an unlabeled piece: how sure the vote is that it is no marker)."""
+
+    label: StringProperty(name="Label")  # the name of its empty: the label, or the raw trajectory's when unlabeled
+    point: StringProperty(name="Trajectory")  # the raw trajectory (*N) that carries it
+    unlabeled: BoolProperty(name="Unlabeled")
     slot: IntProperty(name="Slot")
     frame_start: IntProperty(name="Start")
     frame_end: IntProperty(name="End")
@@ -211,7 +224,19 @@ class MOCAPAL_PG_bone_pair(bpy.types.PropertyGroup):
                                                     "hand (empty: none)")
 
 
-class MOCAPAL_PG_retarget(bpy.types.PropertyGroup):
+class RetargetOptions:
+    """The retargeting's options, shared by the Retarget panel's settings and the operator."""
+
+    reference: EnumProperty(name="Reference", items=REFERENCE_ITEMS, default="rest")
+    reference_frame: IntProperty(name="Reference Frame", default=1,
+                                 description="The solved frame that is the character's rest pose")
+    wrist: EnumProperty(name="Wrist", items=WRIST_ITEMS, default="fingers")
+    pinch: BoolProperty(name="Keep Pinches", default=False,
+                        description="Where our thumb touches a finger, keep the character's thumb and finger "
+                                    "tips as close (a small correction of both)")
+
+
+class MOCAPAL_PG_retarget(RetargetOptions, bpy.types.PropertyGroup):
     """The Retarget panel: the character, its editable bone map and the options."""
 
     armature: PointerProperty(type=bpy.types.Object, name="Armature", poll=is_character, update=_character_changed,
@@ -220,13 +245,6 @@ class MOCAPAL_PG_retarget(bpy.types.PropertyGroup):
     bone_map_index: IntProperty(name="Bone", default=-1)
     map_armature: StringProperty(options={"HIDDEN"})  # the armature the list was made for
     convention: StringProperty(name="Convention", options={"HIDDEN"})
-    reference: EnumProperty(name="Reference", items=REFERENCE_ITEMS, default="rest")
-    reference_frame: IntProperty(name="Reference Frame", default=1,
-                                 description="The solved frame that is the character's rest pose")
-    wrist: EnumProperty(name="Wrist", items=WRIST_ITEMS, default="fingers")
-    pinch: BoolProperty(name="Keep Pinches", default=False,
-                        description="Where our thumb touches a finger, keep the character's thumb and finger "
-                                    "tips as close (a small correction of both)")
 
 
 class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
@@ -251,7 +269,15 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     show_sticks: BoolProperty(name="Sticks", default=True, description="Draw lines between markers of one digit")
     uncertain: CollectionProperty(type=MOCAPAL_PG_uncertain)
     uncertain_index: IntProperty(name="Uncertain Segment", default=-1, update=_jump)
-    uncertain_total: IntProperty(name="Uncertain Segments")
+    uncertain_total: IntProperty(name="Uncertain Segments")  # the queue's length (the list shows at most 1000)
+    uncertain_hidden: IntProperty(name="Left Out")  # uncertain segments the queue's filters leave out
+    queue_labeled_only: BoolProperty(name="Labeled Only", default=False, update=_queue_changed,
+                                     description="Show labeled segments in doubt alone, no unlabeled pieces")
+    queue_min_frames: IntProperty(name="Unlabeled From", default=QUEUE_MIN_FRAMES, min=1, soft_max=120,
+                                  update=_queue_changed, subtype="NONE",
+                                  description="Show unlabeled pieces of at least this many frames (shorter ones "
+                                              "only where they continue a doubtful label or are more likely a "
+                                              "marker than not)")
     corrections: CollectionProperty(type=MOCAPAL_PG_correction)
     corrections_index: IntProperty(name="Correction", default=-1)
     # Where Previous / Next stand: the slot and Blender frame of the segment they last went to
@@ -259,6 +285,7 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
     walk_slot: IntProperty(default=-1, options={"HIDDEN"})
     walk_frame: IntProperty(default=0, options={"HIDDEN"})
     retarget: PointerProperty(type=MOCAPAL_PG_retarget)
+    cleanup: PointerProperty(type=MOCAPAL_PG_cleanup)  # the Cleanup panel (cleanup_settings.py)
 
 
 @bpy.app.handlers.persistent
@@ -278,7 +305,7 @@ def on_load(*_args) -> None:
                 break
 
 
-classes = (MOCAPAL_PG_uncertain, MOCAPAL_PG_correction, MOCAPAL_PG_bone_pair, MOCAPAL_PG_retarget,
+classes = cleanup_classes + (MOCAPAL_PG_uncertain, MOCAPAL_PG_correction, MOCAPAL_PG_bone_pair, MOCAPAL_PG_retarget,
            MOCAPAL_PG_settings)
 
 

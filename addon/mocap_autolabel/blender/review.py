@@ -396,7 +396,7 @@ class LabelRequest:
         settings = LabelSettings(method=self.method, temporal=self.temporal, **options)
         # As the command line does: the layout on one hand, the no-hand rule per hand.
         outputs = Outputs(check_hand=check_layout, check_layout=check_layout, pick_layout=self.pick_layout,
-                          layout_hint="Layout {} in the Mocap tab")
+                          layout_hint="Layout {} in the Mocap tab", hands_hint=("Hands: One", "Hands: Two"))
         # A re-solve labels again only the frames around what the reviewer changed since.
         try:
             result = process_take(self.take, self.layout, settings, outputs, corrections=corrections,

@@ -1,7 +1,8 @@
 """The bad-frames overview: timeline markers where a take's labels need a look.
 
-After every labeling or edit, the worst runs of frames (uncertain samples or labels missing inside
-their span, scored by ``core.review.bad_runs``) get one timeline marker each, at the run's first
+After every labeling or edit, the worst runs of frames (samples of the review queue's segments, with
+the panel's filters, or labels missing inside their span, scored by ``core.review.bad_runs``) get one
+timeline marker each, at the run's first
 frame, so the Timeline and the Dope Sheet show at a glance where to look, and Blender's own
 *Jump to Next Marker* walks them. The markers are the take's: named ``?<take>: ...``, they are
 replaced whenever its labels change and never touch markers of the user or of another take.
@@ -25,7 +26,8 @@ def marker_prefix(take_coll: bpy.types.Collection) -> str:
 
 
 def marker_name(take_coll: bpy.types.Collection, run: BadRun) -> str:
-    """``?<take>: 3 uncertain, 1 missing`` (the most in one frame of the run), at most 63 characters."""
+    """``?<take>: 3 uncertain, 1 missing`` (the most queued samples and missing labels in one frame of the
+    run), at most 63 characters."""
     parts = [f"{run.uncertain} uncertain" if run.uncertain else "", f"{run.missing} missing" if run.missing else ""]
     return f"{marker_prefix(take_coll)} {', '.join(p for p in parts if p)}"[:63]
 
@@ -37,10 +39,11 @@ def clear_bad_frames(scene: bpy.types.Scene, take_coll: bpy.types.Collection) ->
 
 
 def mark_bad_frames(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling, sure: float,
-                    limit: int = MARKER_LIMIT) -> list[BadRun]:
-    """Replace the take's timeline markers by one per worst run (at most ``limit``); returns the runs."""
+                    limit: int = MARKER_LIMIT, **filters) -> list[BadRun]:
+    """Replace the take's timeline markers by one per worst run (at most ``limit``); returns the runs.
+    ``filters``: the review queue's (``labeled_only``, ``min_frames``; see ``core.review.review_queue``)."""
     clear_bad_frames(scene, take_coll)
-    runs = bad_runs(labeling, sure, limit)
+    runs = bad_runs(labeling, sure, limit, **filters)
     first = first_frame(take_coll)
     for run in runs:
         scene.timeline_markers.new(marker_name(take_coll, run), frame=run.start + first)

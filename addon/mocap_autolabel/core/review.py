@@ -45,27 +45,126 @@ def marker_classes(labeling: Labeling, sure: float = SURE) -> np.ndarray:
 
 
 def null_classes(labeling: Labeling, sure: float = SURE) -> np.ndarray:
-    """int8 ``(frames, points)``: the class of each unassigned (null) sample's segment, -1 elsewhere."""
-    out = labeling._paint(segment_classes(labeling, sure), -1, np.int8)
+    """int8 ``(frames, points)``: the class of each unassigned (null) sample's segment, -1 elsewhere.
+
+    An unlabeled piece that the review queue leaves out by default (a short ghost that continues no
+    doubtful label: :func:`review_queue`) is confident: the ghosts the vote is sure about are not
+    shown as uncertain."""
+    classes = segment_classes(labeling, sure)
+    queued = np.zeros(len(labeling), dtype=bool)
+    queued[review_queue(labeling, sure)] = True
+    classes[(labeling.label < 0) & ~queued & (classes != LOCKED)] = CONFIDENT
+    out = labeling._paint(classes, -1, np.int8)
     out[labeling.per_sample() != NULL] = -1
     return out
 
 
 def uncertain_segments(labeling: Labeling, sure: float = SURE) -> np.ndarray:
-    """Indices of the unlocked segments below ``sure``, worst first (then by start frame).
+    """Indices of every unlocked segment below ``sure``, worst first (then by start frame).
 
     Unlabeled segments count too: an uncertain one may be a marker the labeler missed, and the
-    command line and batch count them (:meth:`Labeling.uncertain`, one rule everywhere).
+    command line and batch count them (:meth:`Labeling.uncertain`, one rule everywhere). What a
+    reviewer is shown, and in which order, is :func:`review_queue`: a subset of these.
     """
     return labeling.uncertain(sure)
 
 
-def walk_uncertain(labeling: Labeling, sure: float, frame: int, current: tuple[int, int] | None = None,
-                   previous: bool = False) -> int | None:
-    """The uncertain segment that Next (or Previous) goes to, or None at the end of the walk.
+#: Unlabeled pieces shorter than this (frames) stay out of the review queue by default, unless they
+#: continue a labeled segment in doubt or are more likely a marker than not. On the temporal
+#: benchmark's 316 raw han2018 takes, 8,907 of the 9,643 uncertain unlabeled pieces were shorter; 11 of
+#: those were a marker's samples, 6 of them caught by the continuation rule (the 5 left out: 1-6 frames,
+#: each a gap in its marker). ``benchmarks/review.py`` measures the queue.
+QUEUE_MIN_FRAMES = 10
 
-    The walk visits :func:`uncertain_segments` in time order: by start frame, then by slot (a
-    stable tie-break: several segments often start on one frame, and each must be reached).
+
+def _touches(slot: np.ndarray, start: np.ndarray, stop: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """bool ``(S,)``: segments that end where a ``mask`` segment of the same slot starts, or start where
+    one ends (the same trajectory, no frame between)."""
+    if not mask.any():
+        return np.zeros(len(slot), dtype=bool)
+    span = int(stop.max()) + 1
+    ends, begins = slot[mask] * span + stop[mask], slot[mask] * span + start[mask]
+    return np.isin(slot * span + start, ends) | np.isin(slot * span + stop, begins)
+
+
+def rank_segments(slot, start, stop, label, confidence, locked, sure: float = SURE, *, labeled_only: bool = False,
+                  min_frames: int = QUEUE_MIN_FRAMES) -> np.ndarray:
+    """The review queue over plain per-segment arrays (see :func:`review_queue`): the indices of the
+    segments to show, in the order to look at them."""
+    slot, start, stop = (np.asarray(a, dtype=np.int64).reshape(-1) for a in (slot, start, stop))
+    label = np.asarray(label, dtype=np.int64).reshape(-1)
+    confidence = np.asarray(confidence, dtype=np.float64).reshape(-1)
+    locked = np.asarray(locked, dtype=bool).reshape(-1)
+    length = stop - start
+    unsure = (confidence < sure) & ~locked & (length > 0)
+    labeled = unsure & (label >= 0)
+    shown = labeled.copy()
+    ghost = unsure & (label < 0)
+    cut = ghost & _touches(slot, start, stop, labeled)
+    if not labeled_only:
+        shown |= ghost & ((length >= min_frames) | (confidence < DOUBTFUL) | cut)
+    idx = np.flatnonzero(shown)
+    ghost = label[idx] < 0
+    # Labeled first, least confident first, then shortest (short labels are the likeliest wrong: a
+    # quarter of the 1-9-frame ones were wrong on the temporal benchmark's takes, under 1 % of those of 30
+    # frames or more); then unlabeled pieces: those cut from a doubtful label's trajectory (each of the 6 on
+    # those takes was a marker's samples), then least sure they are no marker, then longest. Ties by start, slot.
+    # Confidence as reports round it (4 decimals): a report's entries rank as the labeling's (queue_entries).
+    by_length, doubt = np.where(ghost, -length[idx], length[idx]), np.round(confidence[idx], 4)
+    return idx[np.lexsort((slot[idx], start[idx], by_length, doubt, ~cut[idx], ghost))]
+
+
+def review_queue(labeling: Labeling, sure: float = SURE, *, labeled_only: bool = False,
+                 min_frames: int = QUEUE_MIN_FRAMES) -> np.ndarray:
+    """Indices of the segments a reviewer should look at, in the order to look at them: the one list
+    behind the panel's list, Previous / Next, the Timeline's marks and the HTML report.
+
+    Of the unlocked segments below ``sure`` (:func:`uncertain_segments`):
+
+    1. every labeled one, least confident first, then shortest: a label in doubt is what a review is
+       for, and short labels are the likeliest wrong;
+    2. then the unlabeled pieces that may be a marker: those that continue a labeled segment in doubt
+       first (the vote cut one trajectory between a doubtful label and no label: one of the two is
+       likely wrong), then least sure, then longest. An unlabeled piece's confidence is how sure the
+       vote is that it is no marker (the calibrated chance that leaving it unlabeled is right). It is
+       shown when it continues a labeled segment in doubt, when it is ``min_frames`` long or longer,
+       or when it is more likely a marker than not (below :data:`DOUBTFUL`). Shorter ghosts are the
+       flicker and spurious reflections that the vote leaves unlabeled: they do not appear as
+       uncertain (:func:`null_classes`).
+
+    Args:
+        labeled_only: labeled segments alone.
+        min_frames: the shortest unlabeled piece shown for its length alone.
+    """
+    return rank_segments(labeling.slot, labeling.start, labeling.stop, labeling.label, labeling.confidence,
+                         labeling.locked, sure, labeled_only=labeled_only, min_frames=min_frames)
+
+
+def queue_entries(segments: list[dict], *, labeled_only: bool = False,
+                  min_frames: int = QUEUE_MIN_FRAMES) -> list[dict]:
+    """The review queue of a report's uncertain segments (``Labeling.summary()["uncertain_segments"]``:
+    dicts with ``slot``, ``start``, ``stop``, ``label`` (None: unlabeled) and ``confidence``), in the order
+    of :func:`review_queue`. Every given segment counts as uncertain (the report chose them at its own
+    threshold), and the labeled segments a piece may continue are among them: the result is the
+    labeling's :func:`review_queue` at that threshold."""
+    if not segments:
+        return []
+    col = {k: np.array([s[k] for s in segments]) for k in ("slot", "start", "stop", "confidence")}
+    label = np.array([NULL if s["label"] is None else 0 for s in segments])
+    order = rank_segments(col["slot"], col["start"], col["stop"], label, col["confidence"],
+                          np.zeros(len(segments), dtype=bool), np.inf, labeled_only=labeled_only,
+                          min_frames=min_frames)
+    return [segments[i] for i in order]
+
+
+def walk_uncertain(labeling: Labeling, sure: float, frame: int, current: tuple[int, int] | None = None,
+                   previous: bool = False, *, labeled_only: bool = False,
+                   min_frames: int = QUEUE_MIN_FRAMES) -> int | None:
+    """The queued segment that Next (or Previous) goes to, or None at the end of the walk.
+
+    The walk visits the :func:`review_queue` (with the same filters) in time order: by start frame,
+    then by slot (a stable tie-break: several segments often start on one frame, and each must be
+    reached).
 
     Args:
         frame: the current sample index.
@@ -74,7 +173,7 @@ def walk_uncertain(labeling: Labeling, sure: float, frame: int, current: tuple[i
             first segment starting at or after ``frame`` (one starting here included) and Previous
             to the last one starting at or before it.
     """
-    idx = uncertain_segments(labeling, sure)
+    idx = review_queue(labeling, sure, labeled_only=labeled_only, min_frames=min_frames)
     if not len(idx):
         return None
     start, slot = labeling.start[idx], labeling.slot[idx]
@@ -335,16 +434,16 @@ class BadRun:
     score: int
 
 
-def frame_trouble(labeling: Labeling, sure: float = SURE) -> tuple[np.ndarray, np.ndarray]:
-    """int ``(frames,)`` twice: per frame, the samples in uncertain segments (labeled or not, as
-    :func:`uncertain_segments` counts them), and the labels missing inside their own span (a label
-    is missing at a frame between its first and last sample where no sample carries it: a gap;
-    a label the take never shows is not counted, it would mark every frame)."""
+def frame_trouble(labeling: Labeling, sure: float = SURE, *, labeled_only: bool = False,
+                  min_frames: int = QUEUE_MIN_FRAMES) -> tuple[np.ndarray, np.ndarray]:
+    """int ``(frames,)`` twice: per frame, the samples of segments in the review queue (labeled or not, as
+    :func:`review_queue` with these filters shows them), and the labels missing inside their own span (a
+    label is missing at a frame between its first and last sample where no sample carries it: a gap; a
+    label the take never shows is not counted, it would mark every frame)."""
+    queued = np.zeros(len(labeling), dtype=bool)
+    queued[review_queue(labeling, sure, labeled_only=labeled_only, min_frames=min_frames)] = True
     per = labeling.per_sample()
-    conf = labeling.per_sample_confidence()
-    locked = labeling._paint(labeling.locked, False, bool)
-    unsure = (per != EMPTY) & (conf < sure) & ~locked
-    uncertain = unsure.sum(axis=1).astype(np.int64)
+    uncertain = labeling._paint(queued, False, bool).sum(axis=1).astype(np.int64)
     m = len(labeling.names)
     present = np.zeros((labeling.n_frames, m), dtype=bool)
     f, s = np.nonzero(per >= 0)
@@ -358,10 +457,11 @@ def frame_trouble(labeling: Labeling, sure: float = SURE) -> tuple[np.ndarray, n
     return uncertain, missing
 
 
-def bad_runs(labeling: Labeling, sure: float = SURE, limit: int | None = None) -> list[BadRun]:
-    """The runs of consecutive frames with uncertain samples or missing labels (:func:`frame_trouble`),
+def bad_runs(labeling: Labeling, sure: float = SURE, limit: int | None = None, *, labeled_only: bool = False,
+             min_frames: int = QUEUE_MIN_FRAMES) -> list[BadRun]:
+    """The runs of consecutive frames with queued samples or missing labels (:func:`frame_trouble`),
     worst (highest score) first, at most ``limit``."""
-    uncertain, missing = frame_trouble(labeling, sure)
+    uncertain, missing = frame_trouble(labeling, sure, labeled_only=labeled_only, min_frames=min_frames)
     score = uncertain + missing
     bad = np.concatenate([[False], score > 0, [False]])
     edges = np.flatnonzero(np.diff(bad.astype(np.int8)))

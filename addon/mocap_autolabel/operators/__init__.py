@@ -1,5 +1,6 @@
 """Blender operators; each calls the core and the blender layer, nothing more."""
 
+from .cleanup import classes as cleanup_classes
 from .corrections import classes as correction_classes
 from .export import classes as export_classes
 from .fill import classes as fill_classes
@@ -12,4 +13,5 @@ from .solve_hand import MOCAPAL_OT_solve_hand
 from .timeline import classes as timeline_classes
 
 classes = ((MOCAPAL_OT_import_markers, MOCAPAL_OT_solve_hand) + label_classes + correction_classes + navigation_classes
-           + export_classes + timeline_classes + fill_classes + make_layout_classes + retarget_classes)
+           + export_classes + timeline_classes + fill_classes + make_layout_classes + retarget_classes
+           + cleanup_classes)

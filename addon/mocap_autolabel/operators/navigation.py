@@ -1,6 +1,6 @@
-"""Walking the uncertain segments of the take in the panel's Take field: Previous / Next Uncertain
-(in time order) and Jump to Segment (a row of the panel's uncertain list). Each sets the frame to
-the segment's start and selects its marker.
+"""Walking the review queue of the take in the panel's Take field: Previous / Next Uncertain (the
+queue's segments, with the panel's filters, in time order) and Jump to Segment (a row of the panel's
+list). Each sets the frame to the segment's start and selects its marker.
 """
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ from .common import _not_a_take, _present, _select_only, reviewed_panel_take
 
 
 class MOCAPAL_OT_next_uncertain(bpy.types.Operator):
-    """Jump to the next (or previous) uncertain segment in time order and select its marker; segments that
-    start on one frame are visited one after the other"""
+    """Jump to the next (or previous) segment of the review queue in time order (labeled segments in doubt, and
+    unlabeled pieces that may be a marker, as the panel's list filters them) and select its marker; segments
+    that start on one frame are visited one after the other"""
 
     bl_idname = "mocap_autolabel.next_uncertain"
     bl_label = "Next Uncertain"
@@ -26,6 +27,7 @@ class MOCAPAL_OT_next_uncertain(bpy.types.Operator):
         return _present(cls, reviewed_panel_take(context), _not_a_take(context) or "Label a take first")
 
     def execute(self, context):
+        from ..blender.lists import queue_filters
         from ..blender.takes import first_frame, load_state, sample_index
         from ..core.review import walk_uncertain
 
@@ -36,9 +38,9 @@ class MOCAPAL_OT_next_uncertain(bpy.types.Operator):
         now = sample_index(coll, context.scene.frame_current)
         # The walk stands on the segment it went to last, as long as the frame is still its start.
         current = (settings.walk_frame - first, settings.walk_slot) if settings.walk_slot >= 0 else None
-        seg = walk_uncertain(lab, settings.sure, now, current, self.previous)
+        seg = walk_uncertain(lab, settings.sure, now, current, self.previous, **queue_filters(settings))
         if seg is None:
-            self.report({"INFO"}, f"No uncertain segment {'before' if self.previous else 'after'} this one")
+            self.report({"INFO"}, f"No segment to review {'before' if self.previous else 'after'} this one")
             return {"CANCELLED"}
         _show_segment(context, coll, lab, seg)
         self.report({"INFO"}, _segment_text(coll, lab, seg))
@@ -50,8 +52,10 @@ def _segment_text(coll, lab, seg: int) -> str:
 
     first = first_frame(coll)
     name = lab.names[lab.label[seg]] if lab.label[seg] >= 0 else "unlabeled"
+    # An unlabeled piece's confidence is how sure the vote is that it is no marker.
+    sure = "confident" if lab.label[seg] >= 0 else "sure it is no marker"
     return (f"{name} ({trajectory_names(coll)[lab.slot[seg]]}), frames {lab.start[seg] + first}-"
-            f"{lab.stop[seg] - 1 + first}, {lab.confidence[seg] * 100:.1f} % confident")
+            f"{lab.stop[seg] - 1 + first}, {lab.confidence[seg] * 100:.1f} % {sure}")
 
 
 def _show_segment(context, coll, lab, seg: int) -> None:
@@ -66,7 +70,7 @@ def _show_segment(context, coll, lab, seg: int) -> None:
 
 
 class MOCAPAL_OT_jump_to_segment(bpy.types.Operator):
-    """Go to an uncertain segment of the list: set the frame to its start and select its marker"""
+    """Go to a segment of the review list: set the frame to its start and select its marker"""
 
     bl_idname = "mocap_autolabel.jump_to_segment"
     bl_label = "Jump to Segment"

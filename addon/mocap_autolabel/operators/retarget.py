@@ -8,16 +8,16 @@ the Retarget panel); the operator's options are its own, and the panel passes it
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, StringProperty
 
-from ..blender.properties import REFERENCE_ITEMS, WRIST_ITEMS
+from ..blender.properties import RetargetOptions
 
 
 def _settings(context):
     return context.scene.mocap_autolabel.retarget
 
 
-class MOCAPAL_OT_retarget(bpy.types.Operator):
+class MOCAPAL_OT_retarget(RetargetOptions, bpy.types.Operator):
     """Key the solved hands of the scene onto a character's armature (its finger and hand bones, through
     the bone map), as one action on the character's NLA track "Mocap hands\""""
 
@@ -28,13 +28,6 @@ class MOCAPAL_OT_retarget(bpy.types.Operator):
     armature: StringProperty(name="Armature",
                              description="The character's armature (empty: the Retarget panel's, else the active "
                                          "armature)")
-    reference: EnumProperty(name="Reference", items=REFERENCE_ITEMS, default="rest")
-    reference_frame: IntProperty(name="Reference Frame", default=1,
-                                 description="The solved frame that is the character's rest pose")
-    wrist: EnumProperty(name="Wrist", items=WRIST_ITEMS, default="fingers")
-    pinch: BoolProperty(name="Keep Pinches", default=False,
-                        description="Where our thumb touches a finger, keep the character's thumb and finger tips "
-                                    "as close")
     use_panel_map: BoolProperty(name="Panel's Bone Map", default=True,
                                 description="Use the Retarget panel's bone map where it was made for this armature "
                                             "(else the bones are mapped automatically)")

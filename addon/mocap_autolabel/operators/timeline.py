@@ -9,8 +9,8 @@ from .common import reviewed_panel_take
 
 
 class MOCAPAL_OT_jump_to_worst(bpy.types.Operator):
-    """Go to the frames that need a look most (uncertain samples and labels missing inside their span)
-    and select a marker that is uncertain there"""
+    """Go to the frames that need a look most (samples of the review queue's segments and labels missing inside
+    their span) and select the marker there that comes first in the queue"""
 
     bl_idname = "mocap_autolabel.jump_to_worst"
     bl_label = "Jump to Worst Frames"
@@ -25,30 +25,32 @@ class MOCAPAL_OT_jump_to_worst(bpy.types.Operator):
     def execute(self, context):
         import numpy as np
 
+        from ..blender.lists import queue_filters
         from ..blender.review import first_frame, load_state, object_for
-        from ..core.review import bad_runs, frame_trouble, plural, uncertain_segments
+        from ..core.review import bad_runs, frame_trouble, plural, review_queue
 
         coll = reviewed_panel_take(context)  # the Review panel's take, as Previous / Next
         lab = load_state(coll).labeling
         sure = context.scene.mocap_autolabel.sure
-        runs = bad_runs(lab, sure, self.rank + 1)
+        filters = queue_filters(context.scene.mocap_autolabel)
+        runs = bad_runs(lab, sure, self.rank + 1, **filters)
         if len(runs) <= self.rank:
-            self.report({"INFO"}, "No frame needs a look: every label is confident and none is missing")
+            self.report({"INFO"}, "No frame needs a look: nothing is left to review and no label is missing")
             return {"CANCELLED"}
         run = runs[self.rank]
-        uncertain, missing = frame_trouble(lab, sure)
+        uncertain, missing = frame_trouble(lab, sure, **filters)
         peak = run.start + int(np.argmax((uncertain + missing)[run.start:run.stop]))
         context.scene.frame_set(peak + first_frame(coll))
-        # Select the worst uncertain segment there, if any, so that Relabel acts on it.
-        unsure = uncertain_segments(lab, sure)
-        here = unsure[(lab.start[unsure] <= peak) & (lab.stop[unsure] > peak)]
+        # Select the segment there that comes first in the queue, if any, so that Relabel acts on it.
+        queue = review_queue(lab, sure, **filters)
+        here = queue[(lab.start[queue] <= peak) & (lab.stop[queue] > peak)]
         obj = object_for(coll, lab, int(here[0])) if len(here) else None
         if obj is not None and obj.name in context.view_layer.objects:
             for other in context.selected_objects:
                 other.select_set(False)
             obj.select_set(True)
             context.view_layer.objects.active = obj
-        self.report({"INFO"}, f"Frame {peak + first_frame(coll)}: {plural(int(uncertain[peak]), 'uncertain sample')}, "
+        self.report({"INFO"}, f"Frame {peak + first_frame(coll)}: {plural(int(uncertain[peak]), 'sample')} to review, "
                               f"{plural(int(missing[peak]), 'label')} missing (frames {run.start + first_frame(coll)}-"
                               f"{run.stop - 1 + first_frame(coll)})")
         return {"FINISHED"}

@@ -19,13 +19,18 @@ class _Sidebar:
 
 
 class MOCAPAL_UL_uncertain(bpy.types.UIList):
-    """Uncertain segments, worst first: label, frames, confidence."""
+    """The review queue, what to look at first on top: labeled segments in doubt (label, raw trajectory, frames,
+    confidence), then unlabeled pieces that may be a marker (trajectory, frames, how sure it is no marker)."""
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         row = layout.row(align=True)
-        row.label(text=item.label, icon="KEYTYPE_EXTREME_VEC" if item.confidence < 0.5 else "KEYTYPE_BREAKDOWN_VEC")
+        if item.unlabeled:
+            row.label(text=item.point, icon="GHOST_ENABLED")
+        else:
+            row.label(text=f"{item.label}  {item.point}",
+                      icon="KEYTYPE_EXTREME_VEC" if item.confidence < 0.5 else "KEYTYPE_BREAKDOWN_VEC")
         row.label(text=f"{item.frame_start}-{item.frame_end}")
-        row.label(text=f"{item.confidence * 100:.0f} %")
+        row.label(text=f"{item.confidence * 100:.1f} %" + (" no marker" if item.unlabeled else ""))
 
 
 class MOCAPAL_UL_corrections(bpy.types.UIList):
@@ -56,6 +61,7 @@ class MOCAPAL_PT_label(_Sidebar, bpy.types.Panel):
         col.prop(settings, "hands")
         col.operator("mocap_autolabel.label", icon="SORTALPHA")
         col.operator("mocap_autolabel.solve_hand", icon="VIEW_PAN")
+        col.operator("mocap_autolabel.export_hand", icon="EXPORT")
 
 
 class MOCAPAL_UL_bone_map(bpy.types.UIList):
@@ -140,7 +146,7 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
             box.label(text=s["props"], icon="INFO")
         box.label(text=f"Labels present: {s['labels']}")
         box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
-        box.label(text=f"Uncertain segments: {s['uncertain']}   Locked: {s['locked']}")
+        box.label(text=f"To review: {settings.uncertain_total} of {s['uncertain']} uncertain   Locked: {s['locked']}")
         if s["never_confident"]:  # calibrated, and honestly never sure: every segment is for review
             col = layout.box().column(align=True)
             col.label(text=f"{state.method} + {state.temporal} never rates a segment confident", icon="INFO")
@@ -159,9 +165,18 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         row.operator("mocap_autolabel.next_uncertain", text="Previous", icon="TRIA_LEFT").previous = True
         row.operator("mocap_autolabel.next_uncertain", text="Next", icon="TRIA_RIGHT").previous = False
         layout.operator("mocap_autolabel.jump_to_worst", text="Worst Frames", icon="ERROR")  # see the Timeline
+        row = layout.row(align=True)
+        row.prop(settings, "queue_labeled_only", toggle=True)
+        sub = row.row(align=True)
+        sub.active = not settings.queue_labeled_only
+        sub.prop(settings, "queue_min_frames")
         layout.template_list("MOCAPAL_UL_uncertain", "", settings, "uncertain", settings, "uncertain_index", rows=6)
         if settings.uncertain_total > len(settings.uncertain):
-            layout.label(text=f"Showing the worst {len(settings.uncertain)} of {settings.uncertain_total}")
+            layout.label(text=f"Showing the first {len(settings.uncertain)} of {settings.uncertain_total}")
+        if settings.uncertain_hidden:
+            layout.label(text=f"{settings.uncertain_hidden} more uncertain: short unlabeled pieces (ghosts)"
+                         if not settings.queue_labeled_only else f"{settings.uncertain_hidden} unlabeled left out",
+                         icon="GHOST_DISABLED")
         layout.prop(settings, "sure", slider=True)
 
 
@@ -226,5 +241,75 @@ class MOCAPAL_PT_legend(_Sidebar, bpy.types.Panel):
         layout.label(text="Dope Sheet: View > Show Group Colors", icon="INFO")
 
 
+class MOCAPAL_UL_fill_preview(bpy.types.UIList):
+    """The previewed marker's gaps: frames, the method that fills each (or why it stays open), its expected error."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        row = layout.row(align=True)
+        row.label(text=f"{item.frame_start}-{item.frame_end}")
+        if item.method:
+            row.label(text=item.method if item.asked == "auto" else f"{item.method} (picked)",
+                      icon="KEYTYPE_GENERATED_VEC")
+            row.label(text=f"{item.error_mm:.1f} mm")
+        else:
+            row.label(text=f"open: {item.reason}", icon="ERROR")
+
+
+class MOCAPAL_PT_cleanup(_Sidebar, bpy.types.Panel):
+    """Spikes, smoothing, short fragments, quick labeling and a fill preview per gap, on the labeled markers."""
+
+    bl_label = "Cleanup"
+    bl_parent_id = "MOCAPAL_PT_review"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        from ..blender.takes import has_review, load_state
+
+        settings = context.scene.mocap_autolabel
+        cs = settings.cleanup
+        layout = self.layout
+        if not has_review(settings.take):
+            layout.label(text="Label a take to clean it up", icon="INFO")
+            return
+        layout.label(text="The selected labeled markers (all if none is):")
+        col = layout.column(align=True)
+        row = col.row(align=True)
+        row.prop(cs, "max_accel")
+        row.prop(cs, "max_speed")
+        col.operator("mocap_autolabel.find_spikes", icon="KEYTYPE_EXTREME_VEC")
+        col = layout.column(align=True)
+        row = col.row(align=True)
+        row.prop(cs, "cutoff_hz")
+        row.prop(cs, "order")
+        col.operator("mocap_autolabel.smooth", icon="MOD_SMOOTH")
+        col = layout.column(align=True)
+        col.prop(cs, "min_frames")
+        col.operator("mocap_autolabel.delete_short_fragments", icon="TRASH")
+        names = load_state(settings.take).labeling.names
+        col = layout.column(align=True)
+        row = col.row(align=True)
+        row.prop(cs, "quick_next")
+        row.label(text=names[cs.quick_next] if cs.quick_next < len(names) else "(past the last label)")
+        col.operator("mocap_autolabel.quick_label", icon="SORTALPHA")
+        box = layout.box()
+        row = box.row(align=True)
+        row.prop(cs, "max_gap")
+        row.operator("mocap_autolabel.fill_preview", icon="VIEWZOOM")
+        if not cs.preview:
+            return
+        box.label(text=f"{cs.preview_name}: {len(cs.preview)} gaps")
+        box.template_list("MOCAPAL_UL_fill_preview", "", cs, "preview", cs, "preview_index", rows=4)
+        if 0 <= cs.preview_index < len(cs.preview):
+            item = cs.preview[cs.preview_index]
+            if item.donors:
+                box.label(text=f"From {len(item.donors.split(', '))}: {item.donors}")
+            if item.tried:
+                box.label(text=f"Tried: {item.tried}")
+        row = box.row(align=True)
+        row.operator_menu_enum("mocap_autolabel.fill_preview_method", "method", text="Fill Gap With")
+        row.operator("mocap_autolabel.fill_preview_apply", text="Apply", icon="CHECKMARK")
+
+
 classes = (MOCAPAL_UL_uncertain, MOCAPAL_UL_corrections, MOCAPAL_UL_bone_map, MOCAPAL_PT_label, MOCAPAL_PT_retarget,
-           MOCAPAL_PT_review, MOCAPAL_PT_relabel, MOCAPAL_PT_corrections, MOCAPAL_PT_legend)
+           MOCAPAL_PT_review, MOCAPAL_PT_relabel, MOCAPAL_PT_corrections, MOCAPAL_PT_legend, MOCAPAL_UL_fill_preview,
+           MOCAPAL_PT_cleanup)
