@@ -22,8 +22,10 @@ import errno
 import functools
 import glob
 import hashlib
+import heapq
 import io
 import json
+import math
 import multiprocessing
 import os
 import re
@@ -632,36 +634,184 @@ def _blender_outputs(take, solved, stem: str, settings: BatchSettings, facts: di
 class Progress:
     """Batch progress on stderr: a bar with ETAs, or JSON lines, or nothing.
 
-    Work is measured in file bytes: the batch ETA is the bytes still to do at the rate of the takes
-    done so far (over ``jobs`` processes), and each take's own ETA its bytes at that rate.
+    A take's time is a fixed part (process start, calibration, writing the .blend and FBX cost about the
+    same for any take) and a part per byte of its file (the frames to label and solve). Two fits on the
+    takes done (:meth:`model`), blended geometrically: ``a + b * size`` by least squares, which counts
+    the more the more the sizes done differ (:data:`SPREAD`); and ``c * size ** p`` by least squares in
+    logarithms, ``p`` between 0 (all of it fixed) and 1 (all of it per byte) drawn towards 1/2
+    (:data:`PRIOR`), the geometric middle of the two, off by at most the square root of the sizes' ratio
+    either way: one take done says its time scaled by the square root of the sizes' ratio. A worker's
+    first take also pays for the worker's start (imports, model load): the fit leaves the first
+    ``jobs`` takes out once as many others are done, and what they took beyond it is the warm-up
+    (:meth:`warmup`) that such a take in flight is expected to take on top.
+
+    The batch ETA is when the last worker would be free (:meth:`eta`): each take in flight takes what
+    is left of its expected time (never less than nothing), the takes not started go in order to the
+    first worker free, over ``jobs`` workers. Takes start in the order :meth:`begin` gives, as a worker
+    frees (a pool's and a cluster's order); a ``start`` event says when one did. A take's time is its
+    span from its start to its ``done`` event where known (what it cost the batch), else the seconds
+    the event gives. Failed takes count as done, not in the fit; skipped ones cost nothing.
     """
 
-    def __init__(self, sizes: dict[str, int], mode: str = "bar", jobs: int = 1, stream=None) -> None:
-        self.sizes, self.mode, self.jobs, self.stream = sizes, mode, jobs, stream or sys.stderr
+    #: How strongly the fit's exponent is drawn towards 1/2: as much as takes whose log sizes vary by this
+    #: much (squared, summed) pull it towards their own (sizes from 1 to 2.7 times each other).
+    PRIOR = 1.0
+    #: How much the sizes done must differ for the fit of a fixed cost and a cost per byte to count half:
+    #: their count times their squared coefficient of variation.
+    SPREAD = 0.5
+
+    def __init__(self, sizes: dict[str, int], mode: str = "bar", jobs: int = 1, stream=None,
+                 clock=time.perf_counter) -> None:
+        self.sizes, self.mode, self.jobs, self.stream, self.clock = sizes, mode, jobs, stream or sys.stderr, clock
         self.total = len(sizes)
         self.done = 0
-        self.left = sum(sizes.values())
-        self.bytes_done = 0
-        self.busy = 0.0  # seconds spent on the takes done (not skipped)
+        self.first: set[str] = set()  # the takes each worker starts with (:meth:`begin`)
+        self.cold: list[tuple[int, float]] = []  # (bytes, seconds) of those done
+        self._sums = NO_SUMS  # of the others (:func:`_add`)
+        self.queue: list[str] = []  # takes to run, not started
+        self.running: dict[str, float] = {}  # take -> when it started (known or inferred)
+        self.inferred: set[str] = set()  # takes whose start was inferred, not told
+        self.freed: list[float] = []  # when workers came free, not yet taken by a take
+        self.began: float | None = None
 
-    def _rate(self) -> float:
-        return self.busy / self.bytes_done if self.bytes_done else float("nan")  # seconds per byte
+    def begin(self, names: list[str]) -> None:
+        """The takes to run, in the order they start (the first ``jobs`` at once, then one as each worker frees)."""
+        self.began = self.clock()
+        self.queue = [n for n in names if n not in self.running]
+        self.first = set(self.queue[:self.jobs])
+
+    def _warm(self) -> bool:
+        """Whether the fit leaves the workers' first takes out: once as many others are done (2 at least)."""
+        return self._sums[0] >= max(2, len(self.cold))
+
+    def _fit_sums(self) -> tuple:
+        """The sums the fit uses (:func:`_add`): of the takes after the workers' first once :meth:`_warm`,
+        else of every take done."""
+        if self._warm():
+            return self._sums
+        sums = self._sums
+        for size, seconds in self.cold:
+            sums = _add(sums, size, seconds)
+        return sums
+
+    def model(self):
+        """:meth:`seconds` as a function of the size (on a worker already started), fitted on the takes done;
+        None before one is. ``a + b * size`` by least squares (a fixed cost and one per byte), and
+        ``c * size ** p`` fitted in logarithms with ``p`` drawn towards 1/2 (:data:`PRIOR`), blended
+        geometrically: the more the sizes done differ (:data:`SPREAD`), the more the first one counts."""
+        n, sx, sy, sxx, sxy, ss, st, sss, sst = self._fit_sums()
+        if not n:
+            return None
+        mx, my = sx / n, sy / n
+        p = min(max((sxy - n * mx * my + self.PRIOR * 0.5) / (sxx - n * mx * mx + self.PRIOR), 0.0), 1.0)
+        c = math.exp(my - p * mx)
+        ms, mt = ss / n, st / n
+        var = max(sss - n * ms * ms, 0.0)  # n times the sizes' variance
+        weight = (var / (ms * ms)) / (var / (ms * ms) + self.SPREAD)
+        if n < 2 or weight < 1e-6:
+            return lambda size: c * _bytes(size) ** p
+        b = (sst - n * ms * mt) / var
+        a = mt - b * ms
+        if b < 0:  # bigger takes were quicker: their sizes say nothing
+            a, b = mt, 0.0
+        elif a < 0:  # no fixed cost seen: time in proportion to bytes
+            a, b = 0.0, st / ss
+        return lambda size: (a + b * _bytes(size)) ** weight * (c * _bytes(size) ** p) ** (1.0 - weight)
+
+    def seconds(self, size: int) -> float:
+        """The seconds a take of ``size`` bytes is expected to take on a worker already started (:meth:`model`;
+        NaN before a take is done)."""
+        return self._predictor()(size)
+
+    def _predictor(self):
+        """:meth:`seconds` as a function of the size, the fit done once."""
+        return self.model() or (lambda size: float("nan"))
+
+    def warmup(self) -> float:
+        """What a worker's first take took beyond :meth:`seconds` (its start), on average; 0 until the fit
+        leaves those takes out (:meth:`_warm`)."""
+        if not self._warm() or not self.cold:
+            return 0.0
+        predict = self._predictor()
+        return sum(max(t - predict(s), 0.0) for s, t in self.cold) / len(self.cold)
+
+    def _timed(self, name: str, size: int, seconds: float) -> None:
+        if name in self.first:
+            self.cold.append((size, seconds))
+        else:
+            self._sums = _add(self._sums, size, seconds)
+
+    def expected(self, name: str) -> float:
+        """The seconds take ``name`` is expected to take, a worker's start included where it is the worker's
+        first (NaN before a take is done)."""
+        return self._expecting()(name)
+
+    def _expecting(self):
+        """:meth:`expected` as a function of the take, the fit done once."""
+        predict, warmup = self._predictor(), self.warmup()
+        return lambda name: predict(self.sizes.get(name, 0)) + (warmup if name in self.first else 0.0)
+
+    def eta(self, now: float | None = None) -> float:
+        """Seconds until the last take is done (NaN before the takes are known or one is done; 0 when
+        none is left)."""
+        if self.began is None:
+            return float("nan")
+        if not self.queue and not self.running:
+            return 0.0
+        if self.model() is None:
+            return float("nan")
+        now = self.clock() if now is None else now
+        expected = self._expecting()
+        free = [max(expected(n) - (now - start), 0.0) for n, start in self.running.items()]
+        free += [0.0] * max(self.jobs - len(free), 0)
+        heapq.heapify(free)
+        for name in self.queue:  # list scheduling: each next take to the first worker free
+            heapq.heapreplace(free, free[0] + expected(name))
+        return max(free)
+
+    def _fill(self) -> None:
+        """Start the takes a free worker would have started (in :meth:`begin`'s order)."""
+        while self.queue and self.began is not None and len(self.running) < self.jobs:
+            name = self.queue.pop(0)
+            self.running[name] = self.freed.pop(0) if self.freed else self.began
+            self.inferred.add(name)
+
+    def _started(self, name: str, now: float) -> None:
+        if name in self.queue:
+            self.queue.remove(name)
+            if len(self.running) >= self.jobs and self.inferred:  # the take thought started was not yet
+                back = max(self.inferred, key=lambda n: self.running[n])
+                self.inferred.discard(back)
+                self.running.pop(back)
+                self.queue.insert(0, back)
+        self.running[name] = now
+        self.inferred.discard(name)
 
     def event(self, kind: str, **fields) -> None:
-        size = self.sizes.get(fields.get("name", ""), 0)
-        if kind in ("done", "failed", "skipped"):
+        name = fields.get("name", "")
+        size = self.sizes.get(name, 0)
+        now = self.clock()
+        self._fill()
+        if kind == "start":
+            self._started(name, now)
+        elif kind in ("done", "failed", "skipped"):
             self.done += 1
-            self.left -= size
+            if name in self.queue:  # finished before it was thought started: a worker ran it instead
+                self._started(name, now - fields.get("seconds", 0.0))
+            start = self.running.pop(name, None)
+            self.inferred.discard(name)
             if kind != "skipped":
-                self.busy += fields.get("seconds", 0.0)
-                self.bytes_done += size
-        batch_eta = self.left * self._rate() / self.jobs
-        take_eta = size * self._rate()
+                self.freed.append(now)
+            if kind == "done":
+                self._timed(name, size, now - start if start is not None else fields.get("seconds", 0.0))
+            self._fill()
+        batch_eta = self.eta(now)
+        take_eta = self.expected(name) if kind == "start" else float("nan")
         if self.mode == "json":
             line = {"event": kind, "done": self.done, "total": self.total, **fields}
             if batch_eta == batch_eta:
                 line["eta_s"] = round(batch_eta, 1)
-            if kind == "start" and take_eta == take_eta:
+            if take_eta == take_eta:
                 line["take_eta_s"] = round(take_eta, 1)
             print(json.dumps(line), file=self.stream, flush=True)
         elif self.mode == "bar":
@@ -670,12 +820,30 @@ class Progress:
             what = {"start": "working on", "done": "done", "failed": "FAILED", "skipped": "skipped",
                     "end": "finished"}.get(kind, kind)
             extra = f": {fields['error']}" if kind == "failed" else ""
-            if kind == "start" and take_eta == take_eta:
+            if take_eta == take_eta:
                 extra = f" (about {_clock(take_eta)})"
             elif kind in ("done", "failed"):
                 extra = f" in {_clock(fields.get('seconds', 0.0))}" + extra
             print(f"[{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} ETA {_clock(batch_eta)}  "
-                  f"{what} {fields.get('name', '')}{extra}", file=self.stream, flush=True)
+                  f"{what} {name}{extra}", file=self.stream, flush=True)
+
+
+def _bytes(size: int) -> float:
+    """A file's size for the ETA's fit: at least a kilobyte (an empty or unreadable file still costs a take)."""
+    return max(float(size), 1024.0)
+
+
+#: No take done yet: count, then the sums of x, y, x², xy (x, y the logs of bytes and seconds), then of
+#: s, t, s², st (bytes and seconds).
+NO_SUMS = (0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def _add(sums: tuple, size: int, seconds: float) -> tuple:
+    """``sums`` (:data:`NO_SUMS`) with one take more."""
+    n, sx, sy, sxx, sxy, ss, st, sss, sst = sums
+    b = _bytes(size)
+    x, y = math.log(b), math.log(max(seconds, 1e-3))
+    return (n + 1, sx + x, sy + y, sxx + x * x, sxy + x * y, ss + b, st + seconds, sss + b * b, sst + b * seconds)
 
 
 def _clock(seconds: float) -> str:
@@ -718,11 +886,13 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
             todo.append((path, name))
     start = time.perf_counter()
     workers = settings.jobs
+    bar.begin([name for _, name in todo])
     if settings.scheduler:
         from .farm import farm_client, run_on_farm, worker_threads
 
         with farm_client(settings.scheduler) as client:
             workers = bar.jobs = worker_threads(client)
+            bar.begin([name for _, name in todo])  # the cluster's workers are here now
             task = functools.partial(farm_take, made_with=made_with, run=run)
             for report in run_on_farm(client, todo, out_dir, settings, task,
                                       functools.partial(failed_report, run=run)):

@@ -240,6 +240,135 @@ def export_bvh(arm_obj: bpy.types.Object, path: str, frame_start: int, frame_end
                                                        rotate_mode="NATIVE", global_scale=1.0))
 
 
+#: Export Hand's file formats: the exporter of each, and its file ending.
+HAND_FORMATS = {"FBX": (export_fbx, ".fbx"), "BVH": (export_bvh, ".bvh")}
+
+
+def _rig_side(arm_obj: bpy.types.Object) -> str:
+    """The side of a solved rig's hand (its calibration's), ``""`` where it names none."""
+    import json
+
+    try:
+        return str(json.loads(arm_obj["mocap_calibration"]).get("side") or "")
+    except (ValueError, AttributeError):
+        raise MocapInputError(None, f"{arm_obj.name!r}: its calibration is not readable") from None
+
+
+def _solved_rigs_of(take_coll: bpy.types.Collection | None, scene: bpy.types.Scene) -> list[bpy.types.Object]:
+    if take_coll is None:
+        return [o for o in scene.objects if o.type == "ARMATURE" and "mocap_calibration" in o]
+    sources = {take_coll.name} | {f"{take_coll.name}:{side}" for side in ("left", "right")}
+    return [o for c in bpy.data.collections if c.get("mocap_solved_from") in sources for o in c.all_objects
+            if o.type == "ARMATURE" and "mocap_calibration" in o]
+
+
+def has_hand_rigs(take_coll: bpy.types.Collection | None, scene: bpy.types.Scene) -> bool:
+    """Whether :func:`take_hand_rigs` finds a rig to export (Export Hand's poll)."""
+    return bool(_solved_rigs_of(take_coll, scene))
+
+
+def take_hand_rigs(take_coll: bpy.types.Collection | None, scene: bpy.types.Scene) -> list[bpy.types.Object]:
+    """The solved hand rigs (armatures keeping a calibration, ``mocap_calibration``) to export: those
+    solved from ``take_coll`` (its collection, or ``<take>:left`` / ``<take>:right``); with no take,
+    those of ``scene``, where it holds one rig per side at most (a scene opened from ``solve --blend``).
+    Sorted by side, left first.
+
+    Raises:
+        MocapInputError: the take (or scene) has no solved hand, or two of one side.
+    """
+    where = "the scene" if take_coll is None else f"take {take_coll.name!r}"
+    sides: dict[str, list] = {}
+    for rig in _solved_rigs_of(take_coll, scene):
+        sides.setdefault(_rig_side(rig), []).append(rig)
+    if not sides:
+        raise MocapInputError(None, f"No solved hand in {where}: run Solve Hand on the labeled take first")
+    for objs in sides.values():
+        if len(objs) > 1:
+            raise MocapInputError(None, f"{len(objs)} solved hands of one side in {where} "
+                                        f"({', '.join(sorted(o.name for o in objs))}): choose their take in the "
+                                        "Take field")
+    return [sides[side][0] for side in sorted(sides)]
+
+
+def default_hand_path(take_coll: bpy.types.Collection | None, scene: bpy.types.Scene, ext: str) -> str:
+    """Export Hand's default file: beside the take's source file (``take_hand.fbx``); with no take, beside
+    the file or take the scene's rig was solved from, else beside the .blend (``<blend>_hand.fbx``)."""
+    ending = f"_hand{ext}"
+    if take_coll is None:
+        rigs = _solved_rigs_of(None, scene)
+        source = ""
+        for coll in (rigs[0].users_collection if rigs else ()):
+            source = str(coll.get("mocap_solved_from") or "")
+            if source:
+                break
+        take_name = source.rsplit(":", 1)[0] if source.endswith((":left", ":right")) else source
+        take_coll = bpy.data.collections.get(take_name) if take_name else None
+        if take_coll is None and os.path.splitext(source)[1]:  # solved from a labeled file
+            return os.path.splitext(bpy.path.abspath(source))[0] + ending
+    if take_coll is not None and "mocap_source" in take_coll:
+        src = str(take_coll.get("mocap_source") or "")
+        return os.path.splitext(bpy.path.abspath(src) if src else take_coll.name)[0] + ending
+    blend = bpy.data.filepath
+    return (os.path.splitext(blend)[0] if blend else "hand") + ending
+
+
+def export_hands(take_coll: bpy.types.Collection | None, scene: bpy.types.Scene, *, filepath: str,
+                 file_format: str = "FBX", bone_names: str = "ours") -> list[str]:
+    """Export Hand: each solved rig of the take (:func:`take_hand_rigs`) alone, with its animation over
+    the frames it was solved on, as FBX (one animation stack named after the file, the rig only, the
+    preset's axes and units: :func:`export_fbx`) or BVH (:func:`export_bvh`), its bones named by
+    ``bone_names`` (:data:`BONE_NAME_PRESETS`).
+
+    One file per hand: a take of one hand writes ``filepath``; of two, one file per hand with the side
+    before the extension (``take_hand_left.fbx``, ``take_hand_right.fbx``), as ``solve --fbx`` does
+    (an engine imports one skeleton per file, and each file's one stack is its hand's). The extension
+    is the format's. Each file is written atomically; the scene is left as it was (the exporter sees a
+    temporary copy in a temporary scene: :func:`export_copy`). Returns the paths written.
+
+    Raises:
+        MocapInputError: an unknown format or preset, no solved hand (or two of one side).
+        OSError: naming a file that cannot be written.
+    """
+    import errno
+
+    from ..core.hands import sided_path
+
+    if file_format not in HAND_FORMATS:
+        raise MocapInputError(None, f"unknown format {file_format!r}; give one of {', '.join(HAND_FORMATS)}")
+    bone_names_for(bone_names, "left")  # an unknown preset fails before anything is written
+    rigs = take_hand_rigs(take_coll, scene)
+    export, ext = HAND_FORMATS[file_format]
+    if not filepath:
+        raise MocapInputError(None, "No file to export to: give a file name")
+    stem, given = os.path.splitext(filepath)
+    if not os.path.basename(stem):
+        raise IsADirectoryError(errno.EISDIR, "is a folder; give a file name", filepath)
+    path = filepath if given.lower() == ext else stem + ext
+    jobs = [(rig, _rig_side(rig), solved_frames(rig)) for rig in rigs]
+    paths = []
+    for rig, side, (first, last) in jobs:
+        out = sided_path(path, side) if len(rigs) > 1 else path
+        export(rig, out, first, last, preset=bone_names, side=side)
+        paths.append(out)
+    return paths
+
+
+def solved_frames(arm_obj: bpy.types.Object) -> tuple[int, int]:
+    """The first and last frame a solved rig covers: those of its kept solve (every frame of the take),
+    else its keys'."""
+    from .armature import SOLVE_RECORD
+
+    record = arm_obj.get(SOLVE_RECORD)
+    if record is not None and "first_frame" in record and int(record.get("frames", 0)) > 0:
+        first = int(record["first_frame"])
+        return first, first + int(record["frames"]) - 1
+    ad = arm_obj.animation_data
+    if ad is None or ad.action is None:
+        raise MocapInputError(None, f"{arm_obj.name!r} has no animation to export: solve the hand again")
+    start, end = ad.action.frame_range
+    return int(round(start)), int(round(end))
+
+
 def save_blend(path: str) -> None:
     """Save the open scene to ``path``, complete or not at all."""
     with atomic_output(path) as tmp:

@@ -187,7 +187,40 @@ def _key_slots(take: Take, slots: np.ndarray, collection: bpy.types.Collection, 
             if not valid[j].any():
                 obj.hide_viewport = obj.hide_render = True
                 continue
-            key_track(obj, frames_all, valid[j], tracks[j].T, action=f"{collection.name}|{obj.name}", scale=scale)
+            key_track(obj, frames_all, valid[j], tracks[j].T, action=raw_action_name(collection.name, obj.name),
+                      scale=scale)
+
+
+#: How the raw (imported) empties' names end once a take is labeled (``*3 (raw)``, :func:`.review._hide_raw`),
+#: and their actions' names always: the labeled and unlabeled empties take the plain names.
+RAW_SUFFIX = " (raw)"
+
+
+def raw_action_name(take_name: str, point: str) -> str:
+    """The action of a raw empty: ``<take>|<point> (raw)``. The labeled and unlabeled empties' actions are
+    ``<take>|<name>`` (``take|R_IndexTip``, ``take|*3``), so a take whose file already names its points
+    (``glove|back_left``) or numbers them (``*3``) as the labeling will never gets a ``.001`` action."""
+    return f"{take_name}|{point}{RAW_SUFFIX}"
+
+
+def _free_action_name(name: str) -> None:
+    """Make ``name`` free for a new action of a take's empty (``<take>|<point>``), where it is held by
+    an orphan (an action no one uses: a marker deleted by hand; it goes) or, in a scene imported before
+    the raw empties' actions had their own names, by a raw empty's action (it takes its raw name)."""
+    held = bpy.data.actions.get(name)
+    if held is None:
+        return
+    if held.users == 0:
+        bpy.data.actions.remove(held)
+        return
+    take, _, point = name.partition("|")
+    coll = bpy.data.collections.get(take)
+    raw = coll.get("mocap_raw") if coll is not None else None
+    for obj in list(raw.objects) if raw is not None else ():
+        ad = obj.animation_data
+        if ad is not None and ad.action == held and obj.get("mocap_point") == point:
+            held.name = raw_action_name(take, point)
+            return
 
 
 def file_frames(take_coll: bpy.types.Collection, take: Take) -> Take:
@@ -225,11 +258,16 @@ def key_track(obj: bpy.types.Object, frames_all: np.ndarray, valid: np.ndarray, 
         key_types: int ``(valid.sum(),)``: keyframe type enum values of the keys, or None.
         group: channel group of new location F-curves.
         hold_type: keyframe type of the visibility keys.
+        action: the name of the object's action where it has none yet (``<take>|<name>``; a raw empty's
+            :func:`raw_action_name`); an orphan action holding it goes, as does an old raw empty's
+            action (it takes its raw name), so that the name carries no ``.001``.
         scale: factor applied to ``xyz`` (float32, as ``xyz * scale`` would give).
 
     Returns:
         the three location F-curves.
     """
+    if action is not None and (obj.animation_data is None or obj.animation_data.action is None):
+        _free_action_name(action)
     animio.ensure_action(obj, action)
     idx = np.flatnonzero(valid)
     n = int(idx.shape[0])

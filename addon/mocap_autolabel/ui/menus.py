@@ -31,6 +31,7 @@ class MOCAPAL_MT_mocap(bpy.types.Menu):
         layout.separator()
         layout.operator("mocap_autolabel.export_labeled", icon="EXPORT")
         layout.operator("mocap_autolabel.solve_hand", icon="VIEW_PAN")
+        layout.operator("mocap_autolabel.export_hand", icon="EXPORT")
 
 
 def menu_mocap(self, context):
