@@ -10,14 +10,17 @@ import sys
 
 
 def main(path: str) -> None:
-    import addon_utils  # Blender's own, importable once bpy is
+    import importlib
+
     import bpy
     from mocap_autolabel.blender.export import save_blend
 
+    addon_utils = importlib.import_module("addon_utils")  # Blender's own: importable once bpy is
     bpy.ops.wm.read_factory_settings(use_empty=True)
     addon_utils.enable("rigify", default_set=True)
     bpy.ops.object.armature_human_metarig_add()
     bpy.context.active_object.name = "Character"
+    addon_utils.disable("rigify", default_set=True)  # the file needs no add-on to be opened
     save_blend(path)
     print(f"  character {path} (Rigify's human meta-rig, armature 'Character')")
 
