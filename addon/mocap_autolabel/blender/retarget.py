@@ -267,10 +267,11 @@ def character(context, armature=None) -> bpy.types.Object:
 
 
 def _sources(context, sources) -> list[tuple[str, SourceHand, int]]:
-    """The hands to retarget: ``sources`` (our rigs, or ``(side, SourceHand, first_frame)``), else every
-    solved rig of the scene; where a side has several, the selected ones."""
+    """The hands to retarget: ``sources`` (our rigs, or ``(side, SourceHand, first_frame)``), else the
+    solved rigs selected, else those of the take in the panel's Take field, else every solved rig of
+    the scene; where a side has several, the selected ones."""
     if sources is None:
-        rigs = solved_rigs(context.scene)
+        rigs = _rigs_in_view(context)
         by_side: dict[str, list] = {}
         for obj in rigs:
             by_side.setdefault(json.loads(obj["mocap_calibration"]).get("side"), []).append(obj)
@@ -295,6 +296,23 @@ def _sources(context, sources) -> list[tuple[str, SourceHand, int]]:
     if len(set(sides)) != len(sides):
         raise MocapInputError(None, f"two solved hands of one side ({', '.join(sorted(sides))}): give one a side")
     return hands
+
+
+def _rigs_in_view(context) -> list:
+    """The solved rigs a retarget means: the selected ones, else the panel's take's (two takes in a
+    scene are never mixed onto one character), else the scene's."""
+    rigs = solved_rigs(context.scene)
+    picked = [o for o in rigs if o.select_get()]
+    if picked:
+        return picked
+    settings = getattr(context.scene, "mocap_autolabel", None)
+    take = getattr(settings, "take", None)
+    if take is not None:
+        own = {take.name, f"{take.name}:left", f"{take.name}:right"}
+        mine = [o for o in rigs if any(c.get("mocap_solved_from") in own for c in o.users_collection)]
+        if mine:
+            return mine
+    return rigs
 
 
 def _as_bone_map(bone_map, rig: TargetRig):

@@ -102,28 +102,33 @@ def retarget(source: SourceHand, rig: TargetRig, bones: Mapping[str, str], *, re
         turn = world_rot.T @ source.rotations[:, 0] @ u.T
         turn[~solved] = np.eye(3)
 
-    posed = np.broadcast_to(rest, (frames,) + rest.shape).copy()  # (F, B, 3, 3)
-    subtree = _subtree(rig, hand)
     mapped = {int(j): i for i, j in enumerate(theirs)}
-    for j in subtree:  # parents first
-        if j in mapped and j != hand:
-            posed[:, j] = turn @ u @ delta[:, mapped[j]] @ u.T @ rest[j]
-        elif j == hand:
-            posed[:, j] = turn @ rest[j]
-        else:
+    moving = Moving(rig, sorted(mapped))
+    posed = np.empty((frames, len(moving.bones), 3, 3))  # the moving bones' rotations, armature space
+    for k, j in enumerate(moving.bones):  # parents first
+        if j == hand:
+            posed[:, k] = turn @ rest[j]
+        elif j in mapped:
+            posed[:, k] = turn @ u @ delta[:, mapped[j]] @ u.T @ rest[j]
+        else:  # rides along with its parent
             p = rig.parents[j]
-            posed[:, j] = posed[:, p] @ rest[p].T @ rest[j]
+            posed[:, k] = posed[:, moving.slot[p]] @ rest[p].T @ rest[j]
 
     facts: dict = {"reference": reference if isinstance(reference, str) else int(reference), "wrist": wrist}
     if pinch:
-        facts["pinch"] = _keep_pinches(source, rig, pairs, posed, subtree, solved)
+        facts["pinch"] = _keep_pinches(source, rig, pairs, posed, moving, solved)
 
     basis = np.empty((frames, len(theirs), 3, 3))
     for i, j in enumerate(theirs):
         p = rig.parents[j]
         parent_rest = rest[p] if p >= 0 else np.eye(3)
-        parent_posed = posed[:, p] if p >= 0 and p in subtree else np.broadcast_to(parent_rest, (frames, 3, 3))
-        basis[:, i] = rest[j].T @ parent_rest @ np.swapaxes(parent_posed, -1, -2) @ posed[:, j]
+        if p in moving.slot:
+            parent_posed = posed[:, moving.slot[p]]
+        elif j == hand:  # the forearm: the animator's, at rest here
+            parent_posed = np.broadcast_to(parent_rest, (frames, 3, 3))
+        else:  # a helper bone that follows the hand through constraints (a generated Rigify rig's)
+            parent_posed = turn @ parent_rest
+        basis[:, i] = rest[j].T @ parent_rest @ np.swapaxes(parent_posed, -1, -2) @ posed[:, moving.slot[j]]
     keep = np.ones(len(theirs), dtype=bool)
     if wrist == "fingers":
         keep[0] = False  # the hand bone stays the animator's
@@ -218,14 +223,25 @@ def _reference(source: SourceHand, g: np.ndarray, solved: np.ndarray, reference:
     return g[frame, ours]
 
 
-def _subtree(rig: TargetRig, root: int) -> list[int]:
-    """``root`` and every bone below it, parents first."""
-    inside = np.zeros(len(rig.names), dtype=bool)
-    inside[root] = True
-    for j in range(root + 1, len(rig.names)):
-        p = rig.parents[j]
-        inside[j] = p >= 0 and inside[p]
-    return [int(j) for j in np.flatnonzero(inside)]
+class Moving:
+    """The bones a retarget moves: the mapped ones and every bone below one (parents first, ``bones``),
+    and each one's row in the arrays of posed rotations (``slot``). Only these are held per frame: a
+    generated Rigify rig has hundreds of bones, its finger controls below helper bones rather than
+    below the hand bone."""
+
+    def __init__(self, rig: TargetRig, mapped: list[int]) -> None:
+        inside = np.zeros(len(rig.names), dtype=bool)
+        inside[mapped] = True
+        for j in range(len(rig.names)):
+            p = rig.parents[j]
+            inside[j] |= p >= 0 and inside[p]
+        self.rig = rig
+        self.bones = [int(j) for j in np.flatnonzero(inside)]
+        self.slot = {j: k for k, j in enumerate(self.bones)}
+
+    def below(self, bone: int) -> list[int]:
+        """Rows of ``bone`` and of every moving bone below it."""
+        return [self.slot[j] for j in self.bones if j == bone or _descends(self.rig, j, bone)]
 
 
 def _hand_locations(source: SourceHand, rig: TargetRig, hand: int, rest: np.ndarray,
@@ -238,20 +254,23 @@ def _hand_locations(source: SourceHand, rig: TargetRig, hand: int, rest: np.ndar
     return np.where(np.isfinite(out), out, 0.0)
 
 
-def _tips(posed: np.ndarray, rig: TargetRig, subtree: list[int], rest: np.ndarray) -> np.ndarray:
-    """``(F, B, 3)`` heads of the subtree's bones in armature space (others at rest), and tails as
-    ``heads + y * length`` are the caller's."""
-    frames = len(posed)
-    heads = np.broadcast_to(rig.rest[:, :3, 3], (frames, len(rig.names), 3)).copy()
-    for j in subtree[1:]:
+def _heads(posed: np.ndarray, moving: Moving, rest: np.ndarray) -> dict[int, np.ndarray]:
+    """``{bone: (F, 3)}`` heads of the moving bones in armature space (a bone below one that does
+    not move keeps its rest head)."""
+    rig = moving.rig
+    heads: dict[int, np.ndarray] = {}
+    for j in moving.bones:
         p = rig.parents[j]
-        offset = rest[p].T @ (rig.rest[j, :3, 3] - rig.rest[p, :3, 3])
-        heads[:, j] = heads[:, p] + (posed[:, p] @ offset[:, None])[..., 0]
+        if p in moving.slot:
+            offset = rest[p].T @ (rig.rest[j, :3, 3] - rig.rest[p, :3, 3])
+            heads[j] = heads[p] + (posed[:, moving.slot[p]] @ offset[:, None])[..., 0]
+        else:
+            heads[j] = np.broadcast_to(rig.rest[j, :3, 3], (len(posed), 3))
     return heads
 
 
 def _keep_pinches(source: SourceHand, rig: TargetRig, pairs: list[tuple[str, str]], posed: np.ndarray,
-                  subtree: list[int], solved: np.ndarray) -> dict:
+                  moving: Moving, solved: np.ndarray) -> dict:
     """Correct ``posed`` (in place) so that the character's thumb and fingertip keep our distance
     where our thumb touches a finger; facts (frames, distances before and after, mm)."""
     mapping = dict(pairs)
@@ -291,11 +310,12 @@ def _keep_pinches(source: SourceHand, rig: TargetRig, pairs: list[tuple[str, str
             continue
         chain_f = [rig.index(mapping[b]) for b in (f"{f}_prox", f"{f}_mid", f"{f}_dist") if b in mapping]
         want = dist[rows, k] * metres_to_armature
-        fixed, gap_before, gap_after = _pinch_ik(posed[rows], rig, subtree, rest, thumb, chain_f, want)
+        fixed, gap_before, gap_after = _pinch_ik(posed[rows], moving, rest, thumb, chain_f, want)
         w = weight[rows]
         for j in thumb + chain_f:  # fade: each bone's turn away from the plain retarget, scaled
-            change = matrix_to_rotvec(fixed[:, j] @ np.swapaxes(posed[rows, j], -1, -2))
-            posed[rows, j] = rotvec_to_matrix(change * w[:, None]) @ posed[rows, j]
+            k = moving.slot[j]
+            change = matrix_to_rotvec(fixed[:, k] @ np.swapaxes(posed[rows, k], -1, -2))
+            posed[rows, k] = rotvec_to_matrix(change * w[:, None]) @ posed[rows, k]
         full = contact[rows]
         to_mm = 1000.0 * rig.unit_scale / source.scale
         before_mm.append(gap_before[full] * to_mm)
@@ -307,20 +327,20 @@ def _keep_pinches(source: SourceHand, rig: TargetRig, pairs: list[tuple[str, str
     return facts
 
 
-def _pinch_ik(posed: np.ndarray, rig: TargetRig, subtree: list[int], rest: np.ndarray, thumb: list[int],
+def _pinch_ik(posed: np.ndarray, moving: Moving, rest: np.ndarray, thumb: list[int],
               finger: list[int], want: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Damped least squares on the two chains (rotations at each bone's head, in armature space)
     until the thumb's and the finger's tips are ``want (R,)`` apart, each moving half the way
     along the line between them. Returns the corrected ``posed``, and the distance errors before
     and after (armature units)."""
     posed = posed.copy()
-    lengths = rig.lengths
+    lengths = moving.rig.lengths
 
     def chain_state(chain):
-        heads = _tips(posed, rig, subtree, rest)
-        h = heads[:, chain]  # (R, k, 3)
+        heads = _heads(posed, moving, rest)
+        h = np.stack([heads[j] for j in chain], axis=1)  # (R, k, 3)
         last = chain[-1]
-        tip = heads[:, last] + posed[:, last, :, 1] * lengths[last]
+        tip = heads[last] + posed[:, moving.slot[last], :, 1] * lengths[last]
         return h, tip
 
     def distance():
@@ -346,7 +366,7 @@ def _pinch_ik(posed: np.ndarray, rig: TargetRig, subtree: list[int], rest: np.nd
             step = step[..., 0].reshape(len(posed), len(chain), 3)
             for i, j in enumerate(chain):  # a turn at bone j moves it and every bone below it
                 turn = rotvec_to_matrix(step[:, i])
-                below = [c for c in subtree if c == j or _descends(rig, c, j)]
+                below = moving.below(j)
                 posed[:, below] = turn[:, None] @ posed[:, below]
     _, _, d = distance()
     return posed, before, d - want
