@@ -270,3 +270,29 @@ def test_solving_again_keeps_the_names_and_orphans_nothing(bpy_module, solved_bl
     assert bpy.ops.mocap_autolabel.solve_hand(calibration=str(solved_blend["calib"])) == {"FINISHED"}
     assert names() == first and not _orphans(bpy)
     assert json.loads(bpy.data.objects["Hand"]["mocap_calibration"])["layout"] == "han19"
+
+
+def test_a_headless_review_scene_keeps_its_solve_for_fill_gaps(bpy_module, solved_blend, tmp_path):
+    """``label --blend --solve-hand``'s review scene (``write_review_scene``): its rig keeps what its solve
+    saw, so the first Fill Gaps in it solves nothing."""
+    from pathlib import Path
+
+    from mocap_autolabel.blender.export import write_review_scene
+    from mocap_autolabel.blender.fill import fill_scene
+    from mocap_autolabel.core.formats import reader_for
+    from mocap_autolabel.core.process import Outputs, process_take
+
+    bpy = bpy_module
+    demo = str(Path(__file__).resolve().parents[2] / "samples" / "demo_take.c3d")
+    take = reader_for(demo)(demo)
+    from mocap_autolabel.core.settings import LabelSettings
+
+    result = process_take(take, load_layout("han19"), LabelSettings(), Outputs(label=True, solve=True))
+    write_review_scene(take, "han19", result.labeling, str(tmp_path / "review.blend"), solved=result.rig())
+    import addon_utils
+
+    if "mocap_autolabel" not in bpy.context.preferences.addons:  # factory settings: the add-on is off
+        addon_utils.enable("mocap_autolabel", default_set=True)
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "review.blend"))
+    coll = bpy.context.scene.mocap_autolabel.take
+    assert fill_scene(coll, "auto", 1.0)["hand_solve"][""]["solved_frames"] == 0

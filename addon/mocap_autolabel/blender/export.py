@@ -623,11 +623,25 @@ def write_review_scene(take, layout_ref: str, labeling, blend: str, method: str 
     write_labeling(coll, take, load_layout(layout_ref), labeling)
     commit(scene, coll, ReviewState(labeling, Review(), layout_ref, method, temporal))
     hands = as_solves(solved)
+    digests = _scene_digests(coll, load_layout(layout_ref), labeling) if hands else {}
     for side, one in hands:
         if side:  # sources as Solve Hand names them, so that solving the take again replaces these rigs
             build_solved_hand(one, solved_hand_collection(scene, f"{coll.name}:{side}", f"{coll.name} {side} hand"),
-                              name=f"Hand_{side[0].upper()}")
+                              name=f"Hand_{side[0].upper()}", digests=digests.get(side))
         else:
-            build_solved_hand(one, solved_hand_collection(scene, coll.name, "Hand"))
+            build_solved_hand(one, solved_hand_collection(scene, coll.name, "Hand"), digests=digests.get(side))
     save_blend(blend)
     return blend
+
+
+def _scene_digests(coll, layout, labeling) -> dict:
+    """What each hand's solve saw, as Fill Gaps reads the scene's take back (``core.fill.solve_digests``):
+    the rigs keep it, so a first Fill Gaps in the review scene reuses the solve."""
+    from ..core.fill import solve_digests
+    from ..core.hands import HandNaming
+    from ..core.labeling import labeled_take
+    from .takes import current_take
+
+    naming = labeling.info.get("hands", {}).get("naming")
+    return solve_digests(labeled_take(current_take(coll), labeling), layout,
+                         HandNaming(naming) if naming else None)

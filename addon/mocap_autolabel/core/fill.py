@@ -1155,6 +1155,16 @@ def frame_digests(observed: np.ndarray) -> np.ndarray:
     return np.frombuffer(raw, dtype="<i4").astype(np.int32)
 
 
+def solve_digests(take: Take, layout: Layout, naming=None) -> dict[str, np.ndarray]:
+    """Per side (``""`` for a take with plain names), :func:`frame_digests` of the markers a solve of the
+    labeled ``take`` sees: what a solved rig keeps, so that Fill Gaps reuses the solve while the labels
+    give the same markers. ``naming``: the take's :class:`..hands.HandNaming` (None: any built-in)."""
+    from .hands import split_hands
+    from .labeling import layout_markers
+
+    return {side: frame_digests(layout_markers(one, layout)) for side, one in split_hands(take, layout, naming)}
+
+
 def digests_fingerprint(digests: np.ndarray) -> str:
     """A short hex fingerprint of a whole take's :func:`frame_digests`."""
     import hashlib

@@ -56,18 +56,10 @@ class SolveRequest:
                           solve_options={"smooth_hz": self.smooth_hz})
         naming = None if self.naming is None else self.naming.template
         result = process_take(self.take, self.layout, LabelSettings(naming=naming), outputs, progress=progress)
-        self.digests = _digests(self.take, self.layout, self.naming)
+        from ..core.fill import solve_digests
+
+        self.digests = solve_digests(self.take, self.layout, self.naming)
         return result.rig()
-
-
-def _digests(take, layout, naming) -> dict:
-    """Per side, :func:`~..core.fill.frame_digests` of the markers a solve of ``take`` sees (the rig
-    keeps them: Fill Gaps reuses the solve while the labels give the same markers)."""
-    from ..core.fill import frame_digests
-    from ..core.hands import split_hands
-    from ..core.labeling import layout_markers
-
-    return {side: frame_digests(layout_markers(one, layout)) for side, one in split_hands(take, layout, naming)}
 
 
 def _stage_printer():
