@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .cache import RunCache
 from .errors import MocapInputError
 from .hand.calibrate import Calibration, calibrate
 from .hand.ik import GATE, MIN_MARKERS, Fit, HandSolver
@@ -77,14 +78,69 @@ def _per_marker_rms(fit: Fit) -> np.ndarray:
     return np.sqrt(out)
 
 
-#: The share of a solve's time its calibration takes (measured on the demo and glove takes: 75-80 %).
+class CalibrationKey:
+    """The inputs of one calibration as a dictionary key: the layout, the labeled frames it is
+    solved on (by value: equal when the positions are, NaN equal to NaN), the side asked for (None:
+    detected), the flat-hand reference frames and the pinch contacts. :func:`calibrate` is
+    deterministic, so equal keys give equal calibrations: a performer's hand, per side, from the
+    same labeled data is calibrated once per :class:`~.cache.RunCache` (a Blender session, one batch
+    run) and reused by every later solve of that data (a re-solve after a look, the other outputs).
+    """
+
+    __slots__ = ("layout", "observed", "side", "reference", "contacts", "_hash")
+
+    def __init__(self, layout: Layout, observed: np.ndarray, side: str | None = None,
+                 reference: Sequence[int] | None = None, contacts: Sequence[tuple[int, str]] = ()) -> None:
+        obs = np.asarray(observed, dtype=float)
+        # One byte pattern per value, so that equal keys hash equally: every NaN alike, -0.0 as 0.0.
+        self.observed = np.where(np.isnan(obs), np.nan, obs + 0.0)
+        self.layout, self.side = layout, side
+        self.reference = None if reference is None else tuple(int(f) for f in reference)
+        self.contacts = tuple((int(f), str(d)) for f, d in contacts)
+        self._hash = hash((layout, side, self.reference, self.contacts, self.observed.shape,
+                           self.observed.tobytes()))
+
+    def __hash__(self) -> int:
+        return self._hash
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, CalibrationKey):
+            return NotImplemented
+        return (self._hash == other._hash and self.layout == other.layout and self.side == other.side
+                and self.reference == other.reference and self.contacts == other.contacts
+                and self.observed.shape == other.observed.shape
+                and np.array_equal(self.observed, other.observed, equal_nan=True))
+
+
+def calibrate_once(cache: RunCache | None, observed: np.ndarray, layout: Layout, side: str | None = None,
+                   reference: Sequence[int] | None = None, contacts: Sequence[tuple[int, str]] = (),
+                   progress: Callable[[float], None] | None = None) -> tuple[Calibration, bool]:
+    """:func:`calibrate` the performer's hand on ``observed (F, M, 3)``, or reuse the calibration
+    ``cache`` holds for the same inputs (:class:`CalibrationKey`). Returns the calibration (a copy:
+    the caller may change it) and whether it was reused. Without a cache it always calibrates."""
+    def make() -> Calibration:
+        return calibrate(observed, layout, side=side, contacts=contacts,
+                         reference=None if reference is None else np.asarray(reference), progress=progress)
+
+    if cache is None:
+        return make(), False
+    key = CalibrationKey(layout, observed, side, reference, contacts)
+    made = []
+    found = cache.remember("calibration", key, lambda: made.append(1) or make())
+    return replace(found, offsets=found.offsets.copy(), names=list(found.names), frames=list(found.frames),
+                   contacts={k: list(v) for k, v in found.contacts.items()}), not made
+
+
+#: The share of a solve's time its calibration takes (measured on the demo and glove takes: 75-80 %,
+#: before and after issue 48 made both parts 4-6 times faster).
 CALIBRATE_SHARE = 0.75
 
 
 def solve_take(take: Take, layout: Layout, calibration: Calibration | None = None,
                calibrate_seconds: float | None = None, reference: Sequence[int] | None = None,
                contacts: Sequence[tuple[int, str]] = (), side: str | None = None,
-               smooth_hz: float = 10.0, progress: Callable[[str, float], None] | None = None) -> HandSolve:
+               smooth_hz: float = 10.0, progress: Callable[[str, float], None] | None = None,
+               cache: RunCache | None = None) -> HandSolve:
     """Fit the hand to a labeled take: calibrate (unless given a calibration), then solve every frame.
 
     Args:
@@ -97,8 +153,11 @@ def solve_take(take: Take, layout: Layout, calibration: Calibration | None = Non
         side: ``left``/``right``; detected from the markers when None.
         smooth_hz: low-pass cut-off for the pose track (0: none).
         progress: called with a stage message and the share of the work done (0-1) as the solve
-            goes (a calibration is about three quarters of it: 20 s of 25 s on the 1,200-frame
+            goes (a calibration is about three quarters of it: 2.5 s of 3.1 s on the 1,200-frame
             demo take); it may raise to stop the solve (a cancelled :class:`~.jobs.Job` does).
+        cache: the caller's run cache (a Blender session, a batch run): a calibration on the same
+            labeled frames with the same options is made once in it and reused
+            (:func:`calibrate_once`); None calibrates every time.
     """
     say = progress or (lambda _msg, _share: None)
     observed = layout_markers(take, layout)
@@ -113,10 +172,10 @@ def solve_take(take: Take, layout: Layout, calibration: Calibration | None = Non
         if bad:
             raise MocapInputError(take.source, f"pinch frames {bad[:5]} lie outside the calibration frames "
                                                f"0-{stop - 1}")
-        calibration = calibrate(observed[:stop], layout, side=side, contacts=contacts,
-                                reference=None if reference is None else np.asarray(reference),
-                                progress=lambda done: say(f"calibrating the hand ({100 * done:.0f} %)",
-                                                          CALIBRATE_SHARE * done))
+        calibration, _ = calibrate_once(cache, observed[:stop], layout, side=side, reference=reference,
+                                        contacts=contacts,
+                                        progress=lambda done: say(f"calibrating the hand ({100 * done:.0f} %)",
+                                                                  CALIBRATE_SHARE * done))
     else:
         calibration.check(layout, "calibration")
         if side is not None and side != calibration.side:
@@ -141,7 +200,8 @@ def solve_hands(take: Take, layout: Layout, naming: HandNaming | None = None,
     (:func:`.hands.split_hands`); each hand calibrated on its own (size, side, marker offsets)
     unless ``calibrations[side]`` is given (a calibration of the other side is not used).
     ``progress(message, share)`` hears each hand's stages (each hand about the same work);
-    ``options`` go to :func:`solve_take`."""
+    ``options`` go to :func:`solve_take` (``cache=`` a :class:`~.cache.RunCache` reuses each
+    hand's calibration when the same labeled data is solved again)."""
     hands = split_hands(take, layout, naming)
     out = []
     for i, (side, one) in enumerate(hands):

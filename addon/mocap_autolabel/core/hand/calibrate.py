@@ -9,24 +9,26 @@ dozen varied frames of a labeled take (METHODS.md B):
 
 over the frames' poses theta_f, the hand length and breadth, and each marker's offset d_j from
 its layout position (rest hand frame; moving along the skin normal n_j costs twice as much as
-moving along the skin). One Levenberg-Marquardt on the dense normal equations: with ~40 frames
-that is ~1,100 unknowns, small enough to solve exactly each step.
+moving along the skin). One Levenberg-Marquardt over all of it, its normal equations solved
+exactly each step by blocks: every frame's pose touches only that frame's markers (and its
+pinches), so the ~1,100 x 1,100 system is block-arrow shaped; each frame's 26 x 26 pose block is
+eliminated (batched Cholesky) and only the Schur complement over the shared unknowns (offsets,
+size, pads: ~60) is solved whole (issue 48: 9 s of dense algebra per calibration before).
 """
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..atomic import atomic_output
+from ..atomic import read_json, write_json
 from ..errors import MocapInputError
 from ..layout import Layout
 from ..synth.poses import CANONICAL_POSES
-from .ik import MIN_MARKERS, HandSolver
+from .ik import MIN_MARKERS, HandSolver, solve_spd
 from .skeleton import BONE_INDEX, DIGITS, FINGERS, N_DOF, POSE_LIMITS, HandModel
 from .skin import Binding, segment_weights, skin_point
 
@@ -95,21 +97,12 @@ class Calibration:
                 "contacts_dropped": self.contacts_dropped}
 
     def save(self, path: str | os.PathLike) -> None:
-        with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
-            json.dump(self.to_dict(), f, indent=1)
+        write_json(path, self.to_dict())
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Calibration:
         """Read a calibration file; any problem is one :class:`MocapInputError` naming the file."""
-        where = os.fspath(path)
-        try:
-            with open(where, encoding="utf-8") as f:
-                data = json.load(f)
-        except FileNotFoundError:
-            raise MocapInputError(where, "calibration file not found") from None
-        except (OSError, ValueError) as exc:
-            raise MocapInputError(where, f"not a readable calibration JSON ({exc})") from None
-        return cls.from_dict(data, where)
+        return cls.from_dict(read_json(path, "calibration"), os.fspath(path))
 
     @classmethod
     def from_dict(cls, data: dict, where: str = "calibration") -> Calibration:
@@ -298,6 +291,7 @@ class _Fit:
     pairs: np.ndarray
     pinned: np.ndarray  # bool (K,): frames of a known pose keep their joint angles
     n_size: int
+    placed: dict = field(default_factory=dict, repr=False)  # size -> the solver of the layout placed on that hand
 
     @classmethod
     def over(cls, obs: np.ndarray, layout: Layout, hand: HandModel, normals: np.ndarray, prior: float,
@@ -332,12 +326,24 @@ class _Fit:
         return self.n_pose + 3 * self.m + self.n_size + self.n_pad
 
     def sized(self, size: np.ndarray) -> HandModel:
-        hand = self.hand
-        return HandModel(float(hand.length * np.exp(size[0])), float(hand.breadth * np.exp(size[1])), hand.side)
+        return self._placed(size).hand
+
+    def _placed(self, size: np.ndarray) -> HandSolver:
+        """The solver of the layout placed on the hand of ``size``, built once per size (a step
+        asks for the same size several times: its residuals, Jacobian and candidate)."""
+        key = np.asarray(size, dtype=float).tobytes()
+        if key not in self.placed:
+            some = next(iter(self.placed.values()), None)
+            if len(self.placed) > 16:
+                self.placed.clear()
+            hand = self.hand
+            h = HandModel(float(hand.length * np.exp(size[0])), float(hand.breadth * np.exp(size[1])), hand.side)
+            placed = self.layout.place(h)[0]
+            self.placed[key] = HandSolver(h, placed) if some is None else some.rebound(h, placed)
+        return self.placed[key]
 
     def model(self, size: np.ndarray, offsets: np.ndarray) -> HandSolver:
-        h = self.sized(size)
-        return HandSolver(h, self.layout.place(h)[0].moved(offsets))
+        return self._placed(size).moved(offsets)
 
     def gaps(self, p: np.ndarray, size: np.ndarray, pads: np.ndarray) -> np.ndarray:
         """``(C, 3)`` thumb pad minus finger pad in each pinch frame, metres."""
@@ -366,70 +372,93 @@ class _Fit:
         return np.where(better[:, None], fresh, poses)
 
     def system(self, poses: np.ndarray, size: np.ndarray, offsets: np.ndarray, pads: np.ndarray,
-               touching: bool) -> tuple[np.ndarray, np.ndarray]:
-        """The Jacobian of every residual (markers, prior, contacts) over every unknown, and the residuals."""
+               touching: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The normal equations ``J^T J`` and gradient ``J^T r`` of every residual (markers, prior,
+        contacts) over every unknown, by blocks: each frame's pose touches only its own markers (and
+        its pinches), so ``J^T J`` is block-arrow shaped. Returns ``a_pp (K, 26, 26)``, ``a_pg
+        (K, 26, G)``, ``a_gg (G, G)``, ``g_p (K, 26)``, ``g_g (G,)``, G the shared unknowns (offsets,
+        size, pads)."""
         k, m, pairs, w, obs0 = self.k, self.m, self.pairs, self.w, self.obs0
-        n_pose, n_par, n_size, n_pad = self.n_pose, self.n_par, self.n_size, self.n_pad
+        n_size, n_pad = self.n_size, self.n_pad
+        n_g = 3 * m + n_size + n_pad
         solver = self.model(size, offsets)
         pred, jac_pose = solver.jacobian(poses)  # (K, M, 3), (K, M, 3, 26)
-        r = (pred - obs0) * w
-        rows = k * m * 3
-        jac = np.zeros((rows + 3 * m + 3 * len(pairs), n_par))
-        jp = (jac_pose * w[..., None]).reshape(k, m * 3, N_DOF)
-        for f in range(k):
-            jac[f * m * 3:(f + 1) * m * 3, f * N_DOF:(f + 1) * N_DOF] = jp[f]
+        r = ((pred - obs0) * w).reshape(k, 3 * m)
+        jp = (jac_pose * w[..., None]).reshape(k, 3 * m, N_DOF)
+        jg = np.zeros((k, m, 3, n_g))
         # Offsets move a marker with its bones' blended rotation.
-        rots, locs = solver.hand.forward(poses)
+        rots, _ = solver.hand.forward(poses)
         skin = rots @ np.swapaxes(solver.hand.rest[0], -1, -2)
         b, bw = solver.binding.bones, solver.binding.weights
         blended = skin[:, b[:, 0]] * bw[None, :, 0, None, None] + skin[:, b[:, 1]] * bw[None, :, 1, None, None]
-        blended = blended * w[..., None]  # (K, M, 3, 3)
-        for j in range(m):
-            jac[:rows, n_pose + 3 * j:n_pose + 3 * j + 3] = _scatter_rows(blended[:, j], k, m, j)
-        jac[rows:rows + 3 * m, n_pose:n_pose + 3 * m] = _block_diag(self.prior_mat)
+        j = np.arange(m)
+        jg[:, :, :, :3 * m].reshape(k, m, 3, m, 3)[:, j, :, j, :] = np.swapaxes(blended * w[..., None], 0, 1)
         con = self.gaps(poses, size, pads) if touching else np.zeros((len(pairs), 3))
+        jc = np.zeros((len(pairs), 3, n_g))  # the contacts' rows over the shared unknowns
         for i in range(n_size):  # hand length and breadth by finite differences
             h = np.zeros(2)
             h[i] = 1e-4
-            moved = (self.model(size + h, offsets).markers(poses) - obs0) * w
-            jac[:rows, n_pose + 3 * m + i] = ((moved - r) / 1e-4).ravel()
+            moved = ((self.model(size + h, offsets).markers(poses) - obs0) * w).reshape(k, 3 * m)
+            jg[..., 3 * m + i] = ((moved - r) / 1e-4).reshape(k, m, 3)
             if touching:
-                jac[rows + 3 * m:, n_pose + 3 * m + i] = ((self.gaps(poses, size + h, pads) - con) / 1e-4).ravel()
-        if touching:
+                jc[..., 3 * m + i] = (self.gaps(poses, size + h, pads) - con) / 1e-4
+        jg = jg.reshape(k, 3 * m, n_g)
+        jpt, jgt = np.swapaxes(jp, 1, 2), np.swapaxes(jg, 1, 2)
+        # Frame by frame, then summed: small products that a threaded BLAS runs on one thread (a
+        # long matrix-vector product is split over threads, and its sums then depend on their count).
+        a_pp = jpt @ jp
+        a_pg = jpt @ jg
+        a_gg = (jgt @ jg).sum(axis=0)
+        g_p = (jpt @ r[..., None])[..., 0]
+        g_g = (jgt @ r[..., None])[..., 0].sum(axis=0)
+        prior = np.zeros((3 * m, 3 * m))
+        prior.reshape(m, 3, m, 3)[j, :, j, :] = self.prior_mat
+        a_gg[:3 * m, :3 * m] += prior.T @ prior
+        g_g[:3 * m] += prior.T @ (self.prior_mat @ offsets[:, :, None]).ravel()
+        if touching and len(pairs):
             h_ = self.sized(size)
             _, jac_pad = HandSolver(h_, _pads(h_, self.digits, pads)).jacobian(poses[pairs[:, 0]])  # (C, D, 3, 26)
             c = np.arange(len(pairs))
             jgap = jac_pad[c, pairs[:, 1]] - jac_pad[c, pairs[:, 2]]  # (C, 3, 26)
-            for e, (row_, _, _) in enumerate(pairs):
-                jac[rows + 3 * m + 3 * e:rows + 3 * m + 3 * e + 3, row_ * N_DOF:(row_ + 1) * N_DOF] = jgap[e]
             for i in range(n_pad):  # pads slide on the skin: finite differences
                 h = np.zeros(n_pad)
                 h[i] = 1e-4
-                jac[rows + 3 * m:, n_par - n_pad + i] = ((self.gaps(poses, size, pads + h) - con) / 1e-4).ravel()
-        res = np.concatenate([r.ravel(), (self.prior_mat @ offsets[:, :, None]).ravel(), con.ravel()])
-        return jac, res
+                jc[..., n_g - n_pad + i] = (self.gaps(poses, size, pads + h) - con) / 1e-4
+            jgt = np.swapaxes(jgap, 1, 2)  # (C, 26, 3)
+            np.add.at(a_pp, pairs[:, 0], jgt @ jgap)
+            np.add.at(a_pg, pairs[:, 0], jgt @ jc)
+            np.add.at(g_p, pairs[:, 0], (jgt @ con[..., None])[..., 0])
+            jct = np.swapaxes(jc, 1, 2)
+            a_gg += (jct @ jc).sum(axis=0)
+            g_g += (jct @ con[..., None])[..., 0].sum(axis=0)
+        return a_pp, a_pg, a_gg, g_p, g_g
 
     def step(self, poses: np.ndarray, size: np.ndarray, offsets: np.ndarray, pads: np.ndarray, touching: bool,
              lam: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """One damped Gauss-Newton step (damping ``lam``): candidate poses, size, offsets and pads."""
-        k, m, n_pose, n_par, n_size, n_pad = self.k, self.m, self.n_pose, self.n_par, self.n_size, self.n_pad
+        """One damped Gauss-Newton step (damping ``lam``): candidate poses, size, offsets and pads.
+
+        The damped normal equations are solved exactly, by blocks (:func:`_block_solve`), instead
+        of as one dense ~1,100-unknown system."""
+        k, m, n_size, n_pad = self.k, self.m, self.n_size, self.n_pad
         lo, hi = POSE_LIMITS
-        jac, res = self.system(poses, size, offsets, pads, touching)
-        a = jac.T @ jac
-        g = jac.T @ res
-        a[np.diag_indices_from(a)] += lam * np.diag(a) + 1e-12
+        a_pp, a_pg, a_gg, g_p, g_g = self.system(poses, size, offsets, pads, touching)
+        d = np.arange(N_DOF)
+        a_pp[:, d, d] += lam * a_pp[:, d, d] + 1e-12
+        e = np.arange(len(a_gg))
+        a_gg[e, e] += lam * a_gg[e, e] + 1e-12
         # Known poses keep their joint angles: those unknowns leave the system.
         fixed = np.zeros((k, N_DOF), dtype=bool)
         fixed[self.pinned, 6:] = True
-        fixed = np.flatnonzero(fixed.ravel())
-        a[fixed, :], a[:, fixed], g[fixed] = 0.0, 0.0, 0.0
-        a[fixed, fixed] = 1.0
-        delta = -np.linalg.solve(a, g)
-        cand_poses = HandSolver.step(poses, delta[:n_pose].reshape(k, N_DOF))
+        a_pp[fixed[:, :, None] | fixed[:, None, :]] = 0.0
+        a_pp[fixed[:, :, None] & np.eye(N_DOF, dtype=bool)] = 1.0
+        a_pg[fixed] = 0.0
+        g_p[fixed] = 0.0
+        delta_p, delta_g = _block_solve(a_pp, a_pg, a_gg, g_p, g_g)
+        cand_poses = HandSolver.step(poses, delta_p)
         cand_poses[:, 6:] = np.clip(cand_poses[:, 6:], lo[6:], hi[6:])
-        cand_offsets = offsets + delta[n_pose:n_pose + 3 * m].reshape(m, 3)
-        cand_size = size + np.concatenate([delta[n_pose + 3 * m:n_pose + 3 * m + n_size], np.zeros(2 - n_size)])
-        cand_pads = pads + delta[n_par - n_pad:]
+        cand_offsets = offsets + delta_g[:3 * m].reshape(m, 3)
+        cand_size = size + np.concatenate([delta_g[3 * m:3 * m + n_size], np.zeros(2 - n_size)])
+        cand_pads = pads + delta_g[len(delta_g) - n_pad:]
         cand_pads[0::2] = np.clip(cand_pads[0::2], 0.25, 1.0)  # stay on the distal phalanx
         return cand_poses, cand_size, cand_offsets, cand_pads
 
@@ -473,6 +502,39 @@ def _solve(fit: _Fit, poses: np.ndarray, rounds: int, iterations: int, contact_a
     return poses, size, offsets, pads, dropped, rms_before
 
 
+def _block_solve(a_pp: np.ndarray, a_pg: np.ndarray, a_gg: np.ndarray, g_p: np.ndarray,
+                 g_g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Solve the block-arrow system ``[[diag(a_pp), a_pg], [a_pg^T, a_gg]] [dp; dg] = -[g_p; g_g]``
+    (K frames' 26 x 26 pose blocks, G shared unknowns): a block Cholesky. Each pose block is
+    factored (``L``) and eliminated through ``Y = L^-1 [a_pg | g_p]``, which leaves the Schur
+    complement ``a_gg - sum Y^T Y`` over the shared unknowns; the poses follow by one back
+    substitution each. Returns ``dp (K, 26)`` and ``dg (G,)``."""
+    k, n, n_g = a_pg.shape
+    try:
+        low = np.linalg.cholesky(a_pp)
+    except np.linalg.LinAlgError:  # not positive definite (never seen): solve the blocks as they are
+        x = solve_spd(a_pp, np.concatenate([a_pg, g_p[..., None]], axis=2))
+        apg_t = np.swapaxes(a_pg, 1, 2)
+        delta_g = solve_spd(((a_gg - (apg_t @ x[..., :-1]).sum(axis=0)))[None],
+                            (-g_g + (apg_t @ x[..., -1:]).sum(axis=0)[:, 0])[None])[0]
+        return -x[..., -1] - (x[..., :-1] * delta_g).sum(axis=2), delta_g
+    lt = np.ascontiguousarray(np.moveaxis(low, 0, -1))  # (26, 26, K)
+    y = np.ascontiguousarray(np.concatenate([a_pg, g_p[..., None]], axis=2).transpose(1, 2, 0))  # (26, G + 1, K)
+    for i in range(n):  # L y = [a_pg | g_p]
+        y[i] /= lt[i, i]
+        y[i + 1:] -= lt[i + 1:, i, None] * y[i]
+    yf = np.ascontiguousarray(y.transpose(2, 0, 1))  # (K, 26, G + 1)
+    yt = np.swapaxes(yf[..., :-1], 1, 2)
+    schur = a_gg - (yt @ yf[..., :-1]).sum(axis=0)
+    rhs = -g_g + (yt @ yf[..., -1:]).sum(axis=0)[:, 0]
+    delta_g = solve_spd(schur[None], rhs[None])[0]
+    x = -(y[:, -1] + (y[:, :-1] * delta_g[:, None]).sum(axis=1))  # (26, K): L^T dp = -(y + Y dg)
+    for i in range(n - 1, -1, -1):
+        x[i] /= lt[i, i]
+        x[:i] -= lt[i, :i] * x[i]
+    return x.T, delta_g
+
+
 def _pads(hand: HandModel, digits: list[str], pads: np.ndarray) -> Binding:
     """Contact points on the skin of each digit's distal phalanx; ``pads`` holds (along, angle) pairs."""
     bones = np.array([BONE_INDEX[f"{d}_dist"] for d in digits], dtype=np.int64)
@@ -490,23 +552,7 @@ def _refine_global(solver: HandSolver, poses: np.ndarray, observed: np.ndarray, 
         j = (jac[..., :6] * seen[..., None, None]).reshape(len(poses), -1, 6)
         jt = np.swapaxes(j, 1, 2)
         delta = np.zeros_like(poses)
-        delta[:, :6] = -np.linalg.solve(jt @ j + 1e-9 * np.eye(6), (jt @ r[..., None]))[..., 0]
+        delta[:, :6] = -solve_spd(jt @ j + 1e-9 * np.eye(6), (jt @ r[..., None])[..., 0])
         poses = HandSolver.step(poses, delta)
         poses[:, 6:] = joints
     return poses
-
-
-def _scatter_rows(block: np.ndarray, k: int, m: int, j: int) -> np.ndarray:
-    """``(K, 3, 3)`` per-frame blocks of marker ``j`` placed in the ``(K * M * 3, 3)`` data rows."""
-    out = np.zeros((k, m, 3, 3))
-    out[:, j] = block
-    return out.reshape(k * m * 3, 3)
-
-
-def _block_diag(blocks: np.ndarray) -> np.ndarray:
-    """``(M, 3, 3)`` to a ``(3M, 3M)`` block-diagonal matrix."""
-    m = len(blocks)
-    out = np.zeros((3 * m, 3 * m))
-    for j in range(m):
-        out[3 * j:3 * j + 3, 3 * j:3 * j + 3] = blocks[j]
-    return out

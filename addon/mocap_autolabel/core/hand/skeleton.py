@@ -109,6 +109,115 @@ class _Joint:
 
 
 @dataclass(frozen=True)
+class _Topology:
+    """How the skeleton's joints hang together, as index arrays (the same for every hand size).
+
+    Bones are kept in level order (the palm, then the bones of each depth, the children of a level
+    in their parents' order), so that each level's parents are one slice of the level above. Every
+    joint turns about z then x, or about x alone, or not at all (``local = pre @ Rz @ Rx @ post``):
+    a turn the joint lacks reads the extra zero row of the angles (an exact identity). Only the
+    thumb's metacarpal has a ``post`` rotation.
+    """
+
+    dofs: tuple  # every joint's dofs, to check a hand against
+    order: np.ndarray  # (B,) bone index at each level-ordered position (position 0 = the palm)
+    back: np.ndarray  # (B,) level-ordered position of each bone
+    post_at: int  # the level-ordered position (less one) of the bone with a post rotation
+    z_col: np.ndarray  # (B - 1,) angle row of the z turn
+    z_sign: np.ndarray  # (B - 1, 1)
+    x_col: np.ndarray  # (B - 1,) angle row of the x turn
+    x_sign: np.ndarray  # (B - 1, 1)
+    levels: tuple[tuple[int, int, int, int], ...]  # (start, stop, parents' start, parents' stop)
+    parent_at: np.ndarray  # (B - 1,) level-ordered position of each non-palm bone's parent
+    dof_axis: np.ndarray  # (D,) in dof_table order: row of the (z, x) axes of all bones, (B - 1) * 2
+    dof_at: np.ndarray  # (D,) level-ordered position of its bone (the pivot)
+
+    @classmethod
+    def of(cls, joints: tuple[_Joint, ...]) -> _Topology:
+        nb = len(joints)
+        children = [[c for c in range(nb) if PARENTS[c] == b] for b in range(nb)]
+        order, levels, level = [0], [], [0]
+        while True:
+            nxt = [c for b in level for c in children[b]]
+            if not nxt:
+                break
+            parent_pos = [order.index(PARENTS[c]) for c in nxt]
+            start = len(order)
+            one = len(set(parent_pos)) == 1  # all from one bone (the palm): its slice broadcasts
+            if not one and parent_pos != list(range(parent_pos[0], parent_pos[0] + len(nxt))):
+                raise ValueError("the skeleton's levels do not hang from slices of the level above")
+            levels.append((start, start + len(nxt), parent_pos[0], parent_pos[-1] + 1))
+            order += nxt
+            level = nxt
+        order = np.array(order)
+        back = np.argsort(order)
+        zero_col = N_DOF + len(FINGERS)
+        z_col, z_sign = np.full(nb - 1, zero_col), np.ones(nb - 1)
+        x_col, x_sign = np.full(nb - 1, zero_col), np.ones(nb - 1)
+        post_at = None
+        rows = []  # row of the axes, in dof_table order
+        for b, joint in enumerate(joints):
+            i = back[b] - 1
+            axes = tuple(a for _, a, _ in joint.dofs)
+            if b == 0 and (axes or not np.array_equal(joint.pre, np.eye(3))):
+                raise ValueError("the palm carries the global transform alone")
+            if axes not in ((), ("x",), ("z", "x")):
+                raise ValueError(f"bone {b} turns about {axes}; forward kinematics expects z then x")
+            for col, a, sign in joint.dofs:
+                if a == "z":
+                    z_col[i], z_sign[i] = col, sign
+                    rows.append(2 * i)
+                else:
+                    x_col[i], x_sign[i] = col, sign
+                    rows.append(2 * i + 1)
+            if not np.array_equal(joint.post, np.eye(3)):
+                if post_at is not None:
+                    raise ValueError("more than one bone has a post rotation")
+                post_at = i
+        dof_bone = [b for b, joint in enumerate(joints) for _ in joint.dofs]
+        return cls(tuple(j.dofs for j in joints), order, back, int(post_at or 0), z_col, z_sign[:, None], x_col,
+                   x_sign[:, None], tuple(levels), back[np.array(PARENTS)[order[1:]]], np.array(rows),
+                   back[np.array(dof_bone)])
+
+
+@dataclass(frozen=True)
+class _Chain:
+    """One hand's joints as arrays, for forward kinematics over all bones and frames at once.
+
+    Arrays are laid out frames last (``(3, 3, bones, F)``): every elementwise step then runs over
+    long contiguous rows instead of numpy's slow inner loops of length 3. A right hand's chain is
+    the left one conjugated by the mirror (``M pre M``, ``M post M``, ``M offset``; ``M Rz(a) M =
+    Rz(-a)``, ``M Rx(a) M = Rx(a)``), so that no mirror is applied afterwards.
+    """
+
+    topo: _Topology
+    pre_cols: np.ndarray  # (3 columns, 3 rows, B - 1, 1) each non-palm bone's pre rotation
+    post: np.ndarray  # (3, 3) the thumb metacarpal's post rotation
+    offset: np.ndarray  # (3, B - 1, 1)
+    z_sign: np.ndarray  # (B - 1, 1) the topology's, negated for a mirrored chain
+    z_axis_sign: float  # -1 for a mirrored chain: its z turns run the other way
+
+    @classmethod
+    def of(cls, joints: tuple[_Joint, ...], mirrored: bool) -> _Chain:
+        topo = _TOPOLOGY if _TOPOLOGY is not None and _TOPOLOGY.dofs == tuple(j.dofs for j in joints) \
+            else _Topology.of(joints)
+        order = topo.order[1:]
+        pre = np.stack([joints[b].pre for b in order])  # (B - 1, 3, 3)
+        post = joints[topo.order[topo.post_at + 1]].post
+        offset = np.stack([joints[b].offset for b in order]).astype(float)  # (B - 1, 3)
+        z_sign = topo.z_sign
+        if mirrored:
+            pre, post, offset = pre * _MIRROR_SIGNS, post * _MIRROR_SIGNS, offset * MIRROR.diagonal()
+            z_sign = -z_sign
+        return cls(topo, np.ascontiguousarray(pre.transpose(2, 1, 0)[..., None]), post,
+                   np.ascontiguousarray(offset.T[..., None]), z_sign, -1.0 if mirrored else 1.0)
+
+
+#: The skeleton's topology, built once from the average hand below (every hand shares it).
+_TOPOLOGY: _Topology | None = None
+
+
+@dataclass(frozen=True)
 class HandModel:
     """A procedural hand of a given size and side.
 
@@ -228,6 +337,61 @@ class HandModel:
             d = r if d is None else d @ r
         return d
 
+    @cached_property
+    def _chain(self) -> _Chain:
+        return _Chain.of(self._joints, mirrored=self.side == "right")
+
+    def chain_soa(self, pose: np.ndarray, world: bool = True,
+                  axes: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Forward kinematics laid out frames last, for solvers: rotations ``(3, 3, 20, F)`` and
+        positions ``(3, 20, F)`` of every bone (as :meth:`forward`, transposed), and with ``axes``
+        every elementary rotation's axis and pivot ``(3, D, F)`` (as :meth:`forward_axes`).
+
+        Every joint's local rotation is built at once, its turns applied to the columns of ``pre``;
+        the chain is walked one depth level (up to five bones) at a time, from the palm's global
+        transform (``world``) or the identity.
+        """
+        pose = np.atleast_2d(np.asarray(pose, dtype=float))
+        chain = self._chain
+        topo = chain.topo
+        n = pose.shape[0]
+        angles = np.concatenate([self._extended_angles(pose), np.zeros((n, 1))], axis=1).T  # (31, F)
+        z = angles[topo.z_col] * chain.z_sign  # (19, F)
+        x = angles[topo.x_col] * topo.x_sign
+        cz, sz, cx, sx = np.cos(z), np.sin(z), np.cos(x), np.sin(x)
+        p0, p1, p2 = chain.pre_cols  # (3, 19, 1) each
+        c0 = cz * p0 + sz * p1  # pre @ Rz, by columns: (3, 19, F)
+        c1 = cz * p1 - sz * p0
+        local = np.stack([c0, cx * c1 + sx * p2, cx * p2 - sx * c1], axis=1)  # @ Rx: (3 rows, 3 cols, 19, F)
+        at = topo.post_at
+        thumb = local[:, :, at]  # (3, 3, F)
+        local[:, :, at] = (thumb[:, :, None] * chain.post[None, :, :, None]).sum(axis=1)
+        rots = np.empty((3, 3, len(topo.order), n))
+        locs = np.empty((3, len(topo.order), n))
+        if world:
+            rots[:, :, 0] = rotvec_to_matrix(pose[:, 0:3]).transpose(1, 2, 0)
+            locs[:, 0] = pose[:, 3:6].T
+        else:
+            rots[:, :, 0] = np.eye(3)[..., None]
+            locs[:, 0] = 0.0
+        off = chain.offset
+        for start, stop, p_start, p_stop in topo.levels:
+            up = rots[:, :, p_start:p_stop]  # (3, 3, k or 1, F)
+            lo = local[:, :, start - 1:stop - 1]
+            rots[:, :, start:stop] = (up[:, 0, None] * lo[None, 0] + up[:, 1, None] * lo[None, 1]
+                                      + up[:, 2, None] * lo[None, 2])
+            o = off[:, start - 1:stop - 1]
+            locs[:, start:stop] = locs[:, p_start:p_stop] + up[:, 0] * o[0] + up[:, 1] * o[1] + up[:, 2] * o[2]
+        ax = pv = None
+        if axes:
+            # The z turn's axis is the parent frame times pre's z column; the x turn's, times pre @ Rz's x column.
+            up = rots[:, :, topo.parent_at]  # (3, 3, 19, F)
+            z_ax = (up[:, 0] * p2[0] + up[:, 1] * p2[1] + up[:, 2] * p2[2]) * chain.z_axis_sign
+            x_ax = up[:, 0] * c0[0] + up[:, 1] * c0[1] + up[:, 2] * c0[2]
+            ax = np.stack([z_ax, x_ax], axis=2).reshape(3, 2 * len(topo.parent_at), n)[:, topo.dof_axis]
+            pv = locs[:, topo.dof_at]
+        return rots[:, :, topo.back], locs[:, topo.back], ax, pv
+
     def forward(self, pose: np.ndarray, world: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Forward kinematics.
 
@@ -240,29 +404,8 @@ class HandModel:
             rotations ``(F, 20, 3, 3)`` and positions ``(F, 20, 3)`` of every bone frame (origin at
             the bone's proximal joint), metres.
         """
-        pose = np.atleast_2d(np.asarray(pose, dtype=float))
-        ext = self._extended_angles(pose)
-        rots: list[np.ndarray] = []  # per bone, (F, 3, 3) contiguous: stacked matmuls stay fast
-        locs: list[np.ndarray] = []
-        for b, joint in enumerate(self._joints):
-            local = joint.pre if not joint.dofs else joint.pre @ self._dof_rotation(joint, ext) @ joint.post
-            p = PARENTS[b]
-            if p < 0:
-                rots.append(np.broadcast_to(local, (pose.shape[0], 3, 3)))
-                locs.append(np.broadcast_to(joint.offset, (pose.shape[0], 3)))
-            else:
-                rots.append(rots[p] @ local)
-                locs.append(locs[p] + rots[p] @ joint.offset)
-        r = np.stack(rots, axis=1)
-        t = np.stack(locs, axis=1)
-        if self.side == "right":
-            r = r * _MIRROR_SIGNS  # == MIRROR @ r @ MIRROR
-            t = t * MIRROR.diagonal()
-        if world:
-            g = rotvec_to_matrix(pose[:, 0:3])
-            r = g[:, None] @ r  # stacked matmul: several times faster than einsum here
-            t = t @ np.swapaxes(g, 1, 2) + pose[:, None, 3:6]
-        return r, t
+        r, t, _, _ = self.chain_soa(pose, world)
+        return np.ascontiguousarray(r.transpose(3, 2, 0, 1)), np.ascontiguousarray(t.transpose(2, 1, 0))
 
     @cached_property
     def dof_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -287,39 +430,9 @@ class HandModel:
             rotations ``(F, 20, 3, 3)``, positions ``(F, 20, 3)`` (as :meth:`forward`), axes
             ``(F, D, 3)`` unit vectors and pivots ``(F, D, 3)`` metres, all in the world.
         """
-        pose = np.atleast_2d(np.asarray(pose, dtype=float))
-        n = pose.shape[0]
-        ext = self._extended_angles(pose)
-        unit = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
-        turn = {"x": rot_x, "y": rot_y, "z": rot_z}
-        rots: list[np.ndarray] = []
-        locs: list[np.ndarray] = []
-        axes: list[np.ndarray] = []
-        pivots: list[np.ndarray] = []
-        for b, joint in enumerate(self._joints):
-            p = PARENTS[b]
-            if p < 0:
-                rots.append(np.broadcast_to(joint.pre, (n, 3, 3)))
-                locs.append(np.broadcast_to(joint.offset, (n, 3)))
-                continue
-            origin = locs[p] + rots[p] @ joint.offset
-            frame = rots[p] @ joint.pre
-            for col, axis, sign in joint.dofs:
-                axes.append(frame @ unit[axis])
-                pivots.append(origin)
-                frame = frame @ turn[axis](sign * ext[:, col])
-            rots.append(frame @ joint.post)
-            locs.append(origin)
-        r, t = np.stack(rots, axis=1), np.stack(locs, axis=1)
-        ax, pv = np.stack(axes, axis=1), np.stack(pivots, axis=1)
-        if self.side == "right":
-            # A reflection M turns a rotation about a by θ into one about -M a by θ.
-            r = r * _MIRROR_SIGNS
-            t, pv = t * MIRROR.diagonal(), pv * MIRROR.diagonal()
-            ax = -ax * MIRROR.diagonal()
-        g = rotvec_to_matrix(pose[:, 0:3])
-        gt = np.swapaxes(g, 1, 2)
-        return g[:, None] @ r, t @ gt + pose[:, None, 3:6], ax @ gt, pv @ gt + pose[:, None, 3:6]
+        r, t, ax, pv = self.chain_soa(pose, axes=True)
+        return (np.ascontiguousarray(r.transpose(3, 2, 0, 1)), np.ascontiguousarray(t.transpose(2, 1, 0)),
+                np.ascontiguousarray(ax.transpose(2, 1, 0)), np.ascontiguousarray(pv.transpose(2, 1, 0)))
 
     def coupling(self, pose: np.ndarray) -> np.ndarray:
         """``(F, 30 - 26)``: derivative of each coupled cupping angle by its finger's MCP flexion."""
@@ -353,6 +466,9 @@ class HandModel:
     def clip(self, pose: np.ndarray) -> np.ndarray:
         """The pose with every joint angle inside its limits."""
         return np.clip(pose, POSE_LIMITS[0], POSE_LIMITS[1])
+
+
+_TOPOLOGY = _Topology.of(HandModel()._joints)
 
 
 def sample_hand_size(rng: np.random.Generator, sex: str | None = None) -> tuple[float, float]:
