@@ -266,3 +266,20 @@ def test_calibration_keys_compare_by_value():
     changed = obs.copy()
     changed[1, 2, 2] += 1e-9
     assert key != CalibrationKey(HAN19, changed, "left", range(3), [(1, "index")])
+
+
+def test_labels_that_fit_no_hand_get_one_line_naming_the_take():
+    """A calibration that runs off to a size no hand has (labels three times a hand's size here; wrong
+    labels in a real take) is the take's problem, said in one line, not an internal error."""
+    from mocap_autolabel.core.errors import MocapInputError
+    from mocap_autolabel.core.layout import load_layout
+    from mocap_autolabel.core.solve import solve_hands
+    from mocap_autolabel.core.synth.generate import clean_config, synthesize
+    from mocap_autolabel.core.take import Take
+
+    layout = load_layout("han19")
+    synth = synthesize(layout, 200, seed=1, config=clean_config())
+    giant = Take(positions=(synth.markers * 3).astype(np.float32), names=list(layout.names), rate=120.0,
+                 source="giant.c3d")
+    with pytest.raises(MocapInputError, match=r"^giant.c3d: its labels fit no plausible hand \(.*mm.*\): check"):
+        solve_hands(giant, layout)

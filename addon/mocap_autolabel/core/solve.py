@@ -12,6 +12,7 @@ from .cache import RunCache
 from .errors import MocapInputError
 from .hand.calibrate import Calibration, calibrate
 from .hand.ik import GATE, MIN_MARKERS, Fit, HandSolver
+from .hand.skeleton import ImplausibleHand
 from .hands import HandNaming, split_hands
 from .labeling import layout_markers
 from .layout import Layout
@@ -220,6 +221,10 @@ def solve_hands(take: Take, layout: Layout, naming: HandNaming | None = None,
             out.append((side, solve_take(one, layout, calibration=given, **kwargs)))
         except MocapInputError as exc:
             raise MocapInputError(take.source, f"{side} hand: {exc.problem}" if side else exc.problem) from exc
+        except ImplausibleHand as exc:  # the calibration ran off to a size no hand has: wrong labels
+            hand = f"the {side} hand's" if side else "its"
+            raise MocapInputError(take.source, f"{hand} labels fit no plausible hand (the calibration reached {exc}): "
+                                               f"check that hand's labels and corrections") from exc
     return out
 
 

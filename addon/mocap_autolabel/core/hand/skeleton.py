@@ -217,6 +217,10 @@ class _Chain:
 _TOPOLOGY: _Topology | None = None
 
 
+class ImplausibleHand(ValueError):
+    """A hand size outside what a human hand measures (a calibration led astray by wrong labels)."""
+
+
 @dataclass(frozen=True)
 class HandModel:
     """A procedural hand of a given size and side.
@@ -238,7 +242,8 @@ class HandModel:
         if self.side not in ("left", "right"):
             raise ValueError(f"side must be 'left' or 'right', got {self.side!r}")
         if not (0.05 < self.length < 0.5 and 0.02 < self.breadth < 0.3):
-            raise ValueError(f"implausible hand size: length {self.length} m, breadth {self.breadth} m")
+            raise ImplausibleHand(f"implausible hand size: length {self.length * 1000:.0f} mm, breadth "
+                                  f"{self.breadth * 1000:.0f} mm")
 
     # -- geometry -------------------------------------------------------------------------
     @property
