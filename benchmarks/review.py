@@ -31,7 +31,12 @@ from datasets import write_report  # noqa: E402
 from mocap_autolabel.core.formats.c3d import write_c3d  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
 from mocap_autolabel.core.metrics import segments_right  # noqa: E402
-from mocap_autolabel.core.review import QUEUE_MIN_FRAMES, review_queue, uncertain_segments  # noqa: E402
+from mocap_autolabel.core.review import (  # noqa: E402
+    QUEUE_MIN_FRAMES,
+    QUEUE_NEAR_MM,
+    review_queue,
+    uncertain_segments,
+)
 from mocap_autolabel.core.synth.generate import synthesize  # noqa: E402
 from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take  # noqa: E402
 
@@ -39,11 +44,17 @@ REPORT = os.path.join(os.path.dirname(__file__), "reports", "review.md")
 DEMO = os.path.join(os.path.dirname(__file__), "..", "samples", "demo_take.c3d")
 
 
+#: The review queue's distance to a missing marker measured besides its default (-1: the rule off, the
+#: queue as it was before it).
+NEAR_SWEEP = (-1, 15, 35)
+
+
 def queue_figures(labeling, take, truth) -> dict:
     """One labeled take's review queue against its truth: the old list (every uncertain segment) and the
     queue by default, the queue's entries that are labeled or unlabeled pieces of at least
     ``QUEUE_MIN_FRAMES`` frames, and the wrong segments (not every sample carries its true label): all,
-    below the sure threshold, and in the queue (with the samples of each)."""
+    below the sure threshold, and in the queue (with the samples of each); the same for the queue at other
+    distances to a missing marker (:data:`NEAR_SWEEP`)."""
     old = uncertain_segments(labeling)
     queue = review_queue(labeling)
     wrong = ~segments_right(labeling, truth, take.valid)
@@ -62,17 +73,24 @@ def queue_figures(labeling, take, truth) -> dict:
         true = truth[rows, labeling.slot[i]]
         ok = take.valid[rows, labeling.slot[i]] & (true >= 0)
         gap += bool(ok.any() and all((per[r] != t).all() for r, t in zip(rows[ok], true[ok])))
-    return {"takes": 1, "old": len(old), "queue": len(queue),
-            "queue_labeled": int(labeled[queue].sum()),
-            "queue_long": int((~labeled[queue] & (length[queue] >= QUEUE_MIN_FRAMES)).sum()),
-            "wrong": int(wrong.sum()), "wrong_unsure": int((wrong & unsure).sum()),
-            "wrong_queued": int((wrong & queued).sum()),
-            "wrong_labeled": int((wrong & unsure & labeled).sum()),
-            "wrong_labeled_queued": int((wrong & queued & labeled).sum()),
-            "wrong_samples": int(length[wrong & unsure].sum()),
-            "wrong_samples_queued": int(length[wrong & queued].sum()),
-            "missed_lengths": sorted(int(v) for v in length[missed]),
-            "missed_labeled": int((missed & labeled).sum()), "missed_gaps": gap}
+    missing = labeling.missing_mm if labeling.missing_mm is not None else np.full(len(labeling), -1)
+    out = {"takes": 1, "old": len(old), "queue": len(queue),
+           "queue_labeled": int(labeled[queue].sum()),
+           "queue_long": int((~labeled[queue] & (length[queue] >= QUEUE_MIN_FRAMES)).sum()),
+           "wrong": int(wrong.sum()), "wrong_unsure": int((wrong & unsure).sum()),
+           "wrong_queued": int((wrong & queued).sum()),
+           "wrong_labeled": int((wrong & unsure & labeled).sum()),
+           "wrong_labeled_queued": int((wrong & queued & labeled).sum()),
+           "wrong_samples": int(length[wrong & unsure].sum()),
+           "wrong_samples_queued": int(length[wrong & queued].sum()),
+           "missed": sorted((int(length[i]), int(missing[i])) for i in np.flatnonzero(missed)),
+           "missed_labeled": int((missed & labeled).sum()), "missed_gaps": gap}
+    for near in NEAR_SWEEP:
+        q = review_queue(labeling, near_mm=near)
+        out[f"near{near}_queue"] = len(q)
+        out[f"near{near}_ok"] = int((labeled[q] | (length[q] >= QUEUE_MIN_FRAMES)).sum())
+        out[f"near{near}_wrong"] = int(wrong[q].sum())
+    return out
 
 
 def add_figures(total: dict | None, one: dict) -> dict:
@@ -155,15 +173,18 @@ def queue_lines(sets: dict[str, dict], hands: int) -> list[str]:
              "(`core/review.py: review_queue`): every labeled segment below Confident at (0.95), least confident "
              "then shortest first; then the unlabeled pieces that may be a marker: at least "
              f"{QUEUE_MIN_FRAMES} frames long, or continuing a labeled segment in doubt on the same trajectory, "
-             "or more likely a marker than not. The old list held every uncertain segment. Wrong: a segment "
-             "not every sample of which carries its true label (`core/metrics.py: segments_right`); "
-             "'in doubt': below 0.95 (a wrong segment at 0.95 or more is in neither list).", "",
+             f"or within {QUEUE_NEAR_MM} mm of where a marker no trajectory carries in that frame should be "
+             "(`missing_marker_distance`: a marker seen for a few frames in its gap), or more likely a marker "
+             "than not. The old list held every uncertain segment. Wrong: a segment not every sample of which "
+             "carries its true label (`core/metrics.py: segments_right`); 'in doubt': below 0.95 (a wrong "
+             "segment at 0.95 or more is in neither list).", "",
              "| takes | old list | queue | labeled or >= 10 frames | wrong in doubt | of them in the queue | "
-             "wrong labeled in the queue | wrong samples in the queue | left out (frames each) | of them gaps |",
+             "wrong labeled in the queue | wrong samples in the queue | left out (frames, mm to a missing marker) "
+             "| of them gaps |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for name, f in sets.items():
         share = (f["queue_labeled"] + f["queue_long"]) / max(f["queue"], 1)
-        missed = ", ".join(str(v) for v in f["missed_lengths"]) or "none"
+        missed = ", ".join(f"{n} ({'none' if mm < 0 else mm})" for n, mm in f["missed"]) or "none"
         lines.append(f"| {name} ({f['takes']}) | {f['old']:,} | {f['queue']:,} | {100 * share:.1f} % | "
                      f"{f['wrong_unsure']} (of {f['wrong']} wrong) | {f['wrong_queued']} | "
                      f"{f['wrong_labeled_queued']} of {f['wrong_labeled']} | "
@@ -175,11 +196,29 @@ def queue_lines(sets: dict[str, dict], hands: int) -> list[str]:
               f"{'met' if min(shares) >= 0.9 else 'NOT met'} (lowest {100 * min(shares):.1f} %); every wrong "
               f"segment in doubt in the queue: {'met' if not left else 'met for the labeled ones, not for'} "
               + (f"{left} of the {unlabeled} wrong unlabeled pieces." if left else "(all of them).")]
-    lines += ["", "Every labeled segment in doubt is in the queue, the wrong ones with them. What it leaves out "
-              "by default are unlabeled pieces of 1-9 frames: where one was a marker's samples, that marker "
-              "lacks them (\"of them gaps\": no trajectory carries the marker's label in those frames; the "
-              "Timeline's marks count such missing labels, and gap filling fills them). Unlabeled From 1 (the "
-              "panel) or `min_frames=1` shows every uncertain piece, as the old list did."]
+    sweep = sorted({*NEAR_SWEEP, QUEUE_NEAR_MM})
+    lines += ["", "The distance to a missing marker, against the queue's length and what it holds (off: the queue "
+              "before this rule; entries, the share labeled or >= 10 frames, the wrong segments in doubt it "
+              f"holds; {QUEUE_NEAR_MM} mm is the default):", "",
+              "| takes | " + " | ".join("off" if n < 0 else f"{n} mm" for n in sweep) + " |",
+              "|---|" + "---|" * len(sweep)]
+    for name, f in sets.items():
+        cells = []
+        for n in sweep:
+            q, ok, w = (f["queue"], f["queue_labeled"] + f["queue_long"], f["wrong_queued"]) if n == QUEUE_NEAR_MM \
+                else (f[f"near{n}_queue"], f[f"near{n}_ok"], f[f"near{n}_wrong"])
+            cells.append(f"{q:,}, {100 * ok / max(q, 1):.1f} %, {w} of {f['wrong_unsure']}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += ["", "Every labeled segment in doubt is in the queue, the wrong ones with them. The unlabeled pieces "
+              "of 1-9 frames that were a marker's samples are nearly all a marker seen again for a few frames in "
+              "the middle of its gap (\"of them gaps\": no trajectory carries the marker's label in those frames); "
+              "the queue finds them by where that marker should be: its last and next positions (within "
+              "1 s), moved as its hand's other markers moved. What it still leaves out lies farther than "
+              f"{QUEUE_NEAR_MM} mm from that (a marker far from where it was, or one whose label another "
+              "trajectory took: 'none' where no marker was missing near in time); a flicker ghost sits as close "
+              "to a hidden marker as often, so a wider reach adds mostly ghosts (the table above). The "
+              "Timeline's marks count missing labels, and gap filling fills them. Unlabeled From 1 (the panel) "
+              "or `min_frames=1` shows every uncertain piece, as the old list did."]
     return lines
 
 

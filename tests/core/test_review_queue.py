@@ -1,7 +1,9 @@
 """Issue 48: the review queue ranks what a reviewer should look at. Labeled segments in doubt first, then
-unlabeled pieces long enough to matter (or continuing a doubtful label, or more likely a marker than not);
-short ghosts the vote is fairly sure of stay out of the list, the walk, the Timeline's marks, the report and
-the key colours; the filters; and, on real labelings against their truth, what the queue holds."""
+unlabeled pieces long enough to matter (or continuing a doubtful label, or close to where a marker the
+labeling lacks should be, or more likely a marker than not); short ghosts the vote is fairly sure of stay out
+of the list, the walk, the Timeline's marks, the report and the key colours; the filters; the distance to a
+missing marker, kept through edits and storage (old states without it rank as before); and, on real
+labelings against their truth, what the queue holds."""
 
 from __future__ import annotations
 
@@ -9,14 +11,20 @@ import os
 
 import numpy as np
 import pytest
-from mocap_autolabel.core.labeling import NULL, Labeling
+from mocap_autolabel.core.labeling import NULL, Constraint, Labeling, segments_from_runs
 from mocap_autolabel.core.metrics import segments_right
 from mocap_autolabel.core.review import (
     CONFIDENT,
     QUEUE_MIN_FRAMES,
+    QUEUE_NEAR_MM,
     UNCERTAIN,
     VERY_UNCERTAIN,
+    apply_constraints,
+    apply_split,
     frame_trouble,
+    labeling_from_arrays,
+    labeling_to_arrays,
+    missing_marker_distance,
     null_classes,
     queue_entries,
     review_queue,
@@ -116,6 +124,100 @@ def test_a_reports_uncertain_segments_rank_as_the_labeling_does():
     assert queue_entries([]) == []
 
 
+def _hidden_marker_take(names=("a", "b")):
+    """30 frames at 100 Hz, two markers of one hand moving together along x (1 mm per frame) plus a jump
+    of +50 mm in y from frame 10 on; marker "a" (slot 0) is hidden in frames 10-19, marker "b" (slot 1) is
+    seen throughout (labeled "b" where ``names`` has it). Slot 2: a point for 2 frames (14-15) where "a"
+    should be (moved with "b"); slot 3: a point for 2 frames far from it; slot 4: a point at "a"'s place in
+    frames 3-4, where "a" is seen (carried)."""
+    frames, slots = 30, 5
+    pos = np.full((frames, slots, 3), np.nan)
+    t = np.arange(frames) * 0.001
+    jump = np.where(np.arange(frames) >= 10, 0.05, 0.0)
+    a = np.stack([t, jump, np.zeros(frames)], axis=1)
+    b = a + [0.02, 0.0, 0.0]
+    pos[:, 1] = b
+    pos[:10, 0], pos[20:, 0] = a[:10], a[20:]
+    pos[14:16, 2] = a[14:16] + [0.002, 0.0, 0.0]  # 2 mm off where "a" should be
+    pos[14:16, 3] = a[14:16] + [0.0, 0.0, 0.08]  # 8 cm away
+    pos[3:5, 4] = a[3:5] + [0.0, 0.001, 0.0]  # next to "a", which is seen there
+    valid = ~np.isnan(pos[..., 0])
+    labels = np.full((frames, slots), NULL)
+    labels[:, 0] = 0
+    if len(names) > 1:
+        labels[:, 1] = 1
+    lab = segments_from_runs(list(names), labels, valid, {})
+    lab.confidence[:] = 0.949
+    return lab, pos
+
+
+def _seg(lab, slot):
+    return int(np.flatnonzero(lab.slot == slot)[0])
+
+
+def test_a_point_where_a_hidden_marker_should_be_is_close_to_it_and_a_ghost_is_not():
+    lab, pos = _hidden_marker_take()
+    mm = missing_marker_distance(lab, pos, hand_size=2, rate=100.0)
+    # "a" is missing in frames 10-19: followed from frame 9 and 20 as "b" moved (the jump in y included).
+    assert 0 <= mm[_seg(lab, 2)] <= 3
+    assert mm[_seg(lab, 3)] >= 75  # a ghost far from it
+    assert mm[_seg(lab, 4)] == -1  # "a" is carried by slot 0 there: no marker is missing
+    assert (mm[lab.label >= 0] == -1).all()
+    # Without "b" to follow, the jump is not seen: where "a" should be is blended from its last and next
+    # positions (at frame 14, under half the 50 mm jump).
+    alone, _ = _hidden_marker_take(names=("a",))
+    assert missing_marker_distance(alone, pos, hand_size=1, rate=100.0)[_seg(alone, 2)] >= 20
+    # A marker not seen within the window: nothing to measure against.
+    assert missing_marker_distance(lab, pos, hand_size=2, rate=100.0, window_s=0.02)[_seg(lab, 2)] == -1
+    np.testing.assert_array_equal(mm, missing_marker_distance(lab, pos, hand_size=2, rate=100.0))  # same again
+
+
+def test_a_short_unlabeled_piece_near_a_missing_marker_is_queued_a_ghost_is_not():
+    lab, pos = _hidden_marker_take()
+    assert not set(review_queue(lab).tolist()) & {_seg(lab, s) for s in (2, 3, 4)}  # not known: as before
+    lab.missing_mm = missing_marker_distance(lab, pos, hand_size=2, rate=100.0)
+    queue = review_queue(lab).tolist()
+    assert _seg(lab, 2) in queue  # a 2-frame piece where the hidden "a" should be
+    assert _seg(lab, 3) not in queue and _seg(lab, 4) not in queue  # far from it; where "a" is carried
+    assert queue.index(_seg(lab, 2)) > max(queue.index(i) for i in np.flatnonzero(lab.label >= 0))
+    assert _seg(lab, 2) not in review_queue(lab, near_mm=-1)  # the rule off
+    assert _seg(lab, 2) not in review_queue(lab, labeled_only=True)
+    assert null_classes(lab)[14, 2] == UNCERTAIN and null_classes(lab)[14, 3] == CONFIDENT
+    # The report's entries carry the distance and rank the same; an old report without it, as before.
+    summary = lab.summary(0.95)["uncertain_segments"]
+    assert [(e["slot"], e["start"]) for e in queue_entries(summary)] == \
+        [(int(lab.slot[i]), int(lab.start[i])) for i in review_queue(lab)]
+    old = [{k: v for k, v in e.items() if k != "missing_mm"} for e in summary]
+    assert [(e["slot"], e["start"]) for e in queue_entries(old)] == \
+        [(int(lab.slot[i]), int(lab.start[i])) for i in review_queue(lab, near_mm=-1)]
+
+
+def test_the_distance_survives_storage_edits_and_old_states_load_without_it():
+    lab, pos = _hidden_marker_take()
+    lab.missing_mm = missing_marker_distance(lab, pos, hand_size=2, rate=100.0)
+    back = labeling_from_arrays(labeling_to_arrays(lab))
+    np.testing.assert_array_equal(back.missing_mm, lab.missing_mm)
+    assert review_queue(back).tolist() == review_queue(lab).tolist()
+    # As a .blend stores it: every array as a list of int64 (confidence as float64).
+    stored = {k: (np.asarray(v, dtype=np.float64 if k == "confidence" else np.int64).tolist()
+                  if isinstance(v, np.ndarray) else v) for k, v in labeling_to_arrays(lab).items()}
+    np.testing.assert_array_equal(labeling_from_arrays(stored).missing_mm, lab.missing_mm)
+    # An old state (stored before the distance was recorded) loads, not knowing it: the queue as before.
+    old = {k: v for k, v in stored.items() if k != "missing_mm"}
+    loaded = labeling_from_arrays(old)
+    assert loaded.missing_mm is None and "missing_mm" not in labeling_to_arrays(loaded)
+    assert review_queue(loaded).tolist() == review_queue(lab, near_mm=-1).tolist()
+    assert labeling_from_arrays({**stored, "missing_mm": [1, 2]}).missing_mm is None  # another length: unknown
+    # Edits keep it where the samples were not edited: a split, a correction elsewhere, a hand's labels.
+    split = apply_split(lab, 2, 15)
+    assert split.missing_mm[(split.slot == 2)].tolist() == [lab.missing_mm[_seg(lab, 2)]] * 2
+    edited = apply_constraints(lab, [Constraint(3, 14, 16, 0)])
+    assert edited.missing_mm[_seg(edited, 2)] == lab.missing_mm[_seg(lab, 2)]
+    assert (edited.missing_mm[edited.slot == 3] == -1).all()  # now labeled, locked
+    part = lab.label_range(1, 2)
+    assert part.missing_mm is not None and len(part.missing_mm) == len(part)
+
+
 @pytest.fixture(scope="module")
 def demo():
     from mocap_autolabel.core.layout import load_layout
@@ -148,16 +250,26 @@ def test_the_demo_takes_queue_is_short_and_holds_its_error(demo):
         [(int(lab.slot[i]), int(lab.start[i])) for i in queue]
 
 
-def test_two_hand_takes_queue_every_doubtful_label_and_mostly_what_matters(han19):
-    """Two interacting synthetic hands (as benchmarks/two_hands.py): every wrong labeled segment in doubt is
-    queued, and at least 90 % of the entries are labeled or unlabeled pieces of at least 10 frames."""
+def test_two_hand_takes_queue_every_wrong_segment_in_doubt_and_mostly_what_matters(han19):
+    """Two interacting synthetic hands (as benchmarks/two_hands.py): every wrong segment in doubt is queued,
+    the short unlabeled pieces among them (markers seen again for a frame or two in their gaps) for lying
+    where their marker should be, and nearly every entry is labeled, an unlabeled piece of at least 10 frames
+    or an error."""
     from mocap_autolabel.core.pipeline import label_take
     from mocap_autolabel.core.synth.two_hands import two_hand_take
 
     two = two_hand_take(han19, 600, seed=1)
     lab = label_take(two.take, han19)
+    assert lab.missing_mm is not None and lab.missing_mm.shape == lab.label.shape
     queue = review_queue(lab)
     wrong = ~segments_right(lab, two.labels, two.take.valid)
-    doubtful_labels = np.flatnonzero(wrong & (lab.label >= 0) & (lab.confidence < 0.95))
-    assert np.isin(doubtful_labels, queue).all()
-    assert len(queue) < len(uncertain_segments(lab)) and _share_worth_a_look(lab, queue) >= 0.9
+    in_doubt = np.flatnonzero(wrong & (lab.confidence < 0.95) & ~lab.locked)
+    assert np.isin(in_doubt, queue).all()
+    short = in_doubt[(lab.label[in_doubt] < 0) & (lab.length[in_doubt] < QUEUE_MIN_FRAMES)]
+    assert len(short) and (lab.missing_mm[short] <= QUEUE_NEAR_MM).all()
+    assert not np.isin(short, review_queue(lab, near_mm=-1)).any()  # the rule is what brings them in
+    # Here 3 of the 4 short pieces it brings in are those errors: on a take this small they alone take the
+    # share of labeled or long entries to 89 % (the bar holds over the benchmark's sets: benchmarks/review.py).
+    assert len(queue) < len(uncertain_segments(lab)) and _share_worth_a_look(lab, queue) >= 0.85
+    worth = (lab.label[queue] >= 0) | (lab.length[queue] >= QUEUE_MIN_FRAMES) | wrong[queue]
+    assert worth.mean() >= 0.95

@@ -177,6 +177,8 @@ def load_state(take_coll: bpy.types.Collection) -> ReviewState:
     data = take_coll["mocap_labeling"]
     settings = take_coll["mocap_settings"]
     arrays = {k: np.asarray(data[k]) for k in ("slot", "start", "stop", "label", "confidence", "locked")}
+    if "missing_mm" in data:  # each unlabeled piece's distance to a missing marker; older states lack it
+        arrays["missing_mm"] = np.asarray(data["missing_mm"])
     labeling = labeling_from_arrays({**arrays, "names": str(data["names"]).split("\n"),
                                      "n_frames": data["n_frames"], "n_points": data["n_points"]},
                                     info=json.loads(settings.get("info", "{}")))

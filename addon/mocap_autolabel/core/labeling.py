@@ -53,6 +53,11 @@ class Labeling:
         info: how it was made (method, temporal mode, timings...), for reports.
         evidence: float32 ``(n, 4)`` or None: what the confidence is computed from (see
             ``core/temporal/confidence.py: segment_evidence``).
+        missing_mm: int32 ``(n,)`` or None: for each unlabeled segment, how far (mm) its nearest
+            sample lies from where a marker the labeling lacks in that frame should be, -1 where no
+            such marker was seen near in time (and for labeled segments); the review queue shows a
+            short unlabeled piece close to a missing marker (``core/review.py:
+            missing_marker_distance``). None: not known (a labeling stored before it was recorded).
     """
 
     names: list[str]
@@ -66,6 +71,7 @@ class Labeling:
     locked: np.ndarray
     info: dict
     evidence: np.ndarray | None = None
+    missing_mm: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.slot.shape[0])
@@ -100,10 +106,11 @@ class Labeling:
         from 0, with those names; the rest of the take is left out."""
         keep = (self.label >= first) & (self.label < stop)
         evidence = None if self.evidence is None else self.evidence[keep]
+        missing = None if self.missing_mm is None else self.missing_mm[keep]
         return Labeling(names=self.names[first:stop], n_frames=self.n_frames, n_points=self.n_points,
                         slot=self.slot[keep], start=self.start[keep], stop=self.stop[keep],
                         label=(self.label[keep] - first).astype(np.int16), confidence=self.confidence[keep],
-                        locked=self.locked[keep], info=self.info, evidence=evidence)
+                        locked=self.locked[keep], info=self.info, evidence=evidence, missing_mm=missing)
 
     def uncertain(self, confident: float = 0.95) -> np.ndarray:
         """Indices of the segments a reviewer should look at: unlocked, below ``confident``, labeled or
@@ -121,7 +128,8 @@ class Labeling:
         (``first_frame`` is the frame of sample 0, as the file and Blender count; both inclusive),
         its ``label`` (None: unlabeled), the ``point`` that shows it in the labeled C3D and in
         Blender (the label, or the unlabeled point's name from ``points``, default ``*<slot>``) and
-        its ``confidence``.
+        its ``confidence``; an unlabeled one also its ``missing_mm`` where the labeling knows it (see
+        :attr:`missing_mm`: the review queue's entries rank the same from the report).
         """
         named = self.label >= 0
         samples = self.length
@@ -134,6 +142,8 @@ class Labeling:
                               "frame_start": int(self.start[i]) + int(first_frame),
                               "frame_end": int(self.stop[i]) - 1 + int(first_frame),
                               "label": label, "point": point, "confidence": round(float(self.confidence[i]), 4)})
+            if label is None and self.missing_mm is not None:
+                uncertain[-1]["missing_mm"] = int(self.missing_mm[i])
         return {
             "segments": len(self),
             "labeled_segments": int(named.sum()),

@@ -16,12 +16,12 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from .cache import RunCache
-from .checks import HandCheck, LayoutDoubt, hand_checks, work_limit_warning
+from .checks import HandCheck, LayoutDoubt, check_hand, hand_checks, work_limit_warning
 from .errors import MocapInputError
 from .fill import MAX_GAP, fill_gaps
 from .hand.calibrate import Calibration
 from .hands import HandNaming
-from .labelers import Labeler
+from .labelers import Labeler, labeler_method
 from .labelers.onnx_labeler import shipped_model
 from .labeling import Labeling, labeled_take
 from .layout import DEFAULT_LAYOUT, Layout, builtin_layouts, layout_for_names, load_layout
@@ -66,6 +66,8 @@ class Outputs:
         confident: the confidence a segment needs to count as confident in the checks.
         layout_hint: how the front end's user picks another layout (``{}``: its name), for the
             no-hand rule's message.
+        hands_hint: how the front end's user forces one hand and two, for the message of one hand
+            forced on a take of two.
     """
 
     label: bool = True
@@ -80,6 +82,7 @@ class Outputs:
     solve_options: dict = field(default_factory=dict)
     confident: float = 0.95
     layout_hint: str = "--layout {}"
+    hands_hint: tuple[str, str] = ("--hands 1", "--hands 2")
 
 
 @dataclass
@@ -213,6 +216,54 @@ def _label(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs
     return layout, labeling, doubt, picked
 
 
+def _two_hand_reading(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs, corrections: Corrections,
+                      labeling: Labeling, doubt: LayoutDoubt | None, cache: RunCache, progress: Progress,
+                      **inputs) -> tuple[Labeling, list[tuple[str, HandCheck]]] | str | None:
+    """A take labeled as one hand in which no hand was found may hold two: one hand forced on it
+    (``hand_count`` 1) spreads the layout over both, and under heavy occlusion two hands may label
+    too few samples confidently to beat one (:func:`.stages.refine.one_hand_stage`). Where the
+    no-hand rule finds a hand among two, the labeling and its checks: for one hand forced, the hand
+    found in more frames, labeled on its own (the other hand's samples kept out), with a warning
+    that names it; else the two hands, with a warning. A string: that hand, labeled on its own, is
+    no hand (the reason). None: no hand among two either (or not tried: a method that labels one
+    hand, IK validation, corrections of a take read as one hand)."""
+    facts = labeling.info.get("hands", {})
+    forced = str(settings.hand_count) == "1"
+    if (facts.get("count", 1) != 1 or not labeler_method(settings.method).labels_two_hands
+            or not (forced or ("two_hands_rejected" in facts and not settings.validate
+                               and not corrections.constraints))):
+        return None
+    progress("no hand found as one hand: looking for two", LABEL_SHARE)
+    two = label_take(take, layout, settings.but(hand_count=2, sides=None, validate=False),
+                     corrections=corrections.but(constraints=(), splits=()), cache=cache, **inputs)
+    if two.info["hands"]["count"] != 2:
+        return None
+    checks = hand_checks(take, layout, two, doubt)
+    if not any(check.found for _, check in checks):
+        return None
+    if not forced:
+        two.info["hands"]["warning"] = "; ".join(filter(None, [two.info["hands"].get("warning"), (
+            "labeled as two hands: as one hand, no hand was found")]))
+        return two, checks
+    m = len(layout)
+    best = max(range(2), key=lambda h: checks[h][1].share)
+    per = two.per_sample()
+    elsewhere = (per >= 0) & (per // m != best)  # the other hand's samples
+    if corrections.exclude is not None:
+        elsewhere |= corrections.exclude
+    one = label_take(take, layout, settings, corrections=corrections.but(exclude=elsewhere), cache=cache, **inputs)
+    check = check_hand(take, layout, one, doubt, points=(take.valid & ~elsewhere).sum(axis=1))
+    one_hint, two_hint = outputs.hands_hint
+    side = checks[best][0]
+    if not check.found:
+        return (f"two hands found; {one_hint} labels one of them, and finds no hand in the {side} one: "
+                f"{check.describe(outputs.layout_hint)} ({two_hint} labels both)")
+    one.info["hands"]["warning"] = "; ".join(filter(None, [one.info["hands"].get("warning"), (
+        f"two hands found; {one_hint} labels one of them, the {side} hand here (a hand in "
+        f"{100 * check.share:.0f} % of frames); {two_hint} labels both")]))
+    return one, [("", check)]
+
+
 def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs = Outputs(), *,
                  corrections: Corrections | None = None, previous: Labeling | None = None,
                  labeler: Labeler | None = None, fit: np.ndarray | None = None, start: np.ndarray | None = None,
@@ -221,6 +272,9 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
     """Label ``take`` (unless it is labeled already), check it, solve the hand(s) and fill the gaps
     as ``outputs`` asks; ``solves`` (``[(side, HandSolve)]``, e.g. a scene's rig) are used instead
     of solving again. The other keywords go to :func:`.pipeline.label_take`.
+
+    A take labeled as one hand in which the no-hand rule finds none is read as two hands where it may
+    hold two (one hand forced, or two hands rejected for one): see :func:`_two_hand_reading`.
 
     Raises:
         MocapInputError: no hand found (the no-hand rule), or a take the steps cannot work with.
@@ -238,9 +292,17 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
         if outputs.check_hand:
             checks = hand_checks(take, layout, labeling, doubt)
             if not any(check.found for _, check in checks):
-                hint = facts.get("warning")  # a take of two hands that never come apart
-                said = [f"{side} hand: " * bool(side) + check.describe(outputs.layout_hint) for side, check in checks]
-                raise MocapInputError(take.source, "; ".join(said + ([hint] if hint else [])))
+                other = _two_hand_reading(take, layout, settings, outputs, corrections or Corrections(), labeling,
+                                          doubt, cache, progress, labeler=labeler, fit=fit, start=start)
+                if isinstance(other, str):
+                    raise MocapInputError(take.source, other)
+                if other is None:
+                    hint = facts.get("warning")  # a take of two hands that never come apart
+                    said = [f"{side} hand: " * bool(side) + check.describe(outputs.layout_hint)
+                            for side, check in checks]
+                    raise MocapInputError(take.source, "; ".join(said + ([hint] if hint else [])))
+                labeling, checks = other
+                labeled, facts = labeled_take(take, labeling), labeling.info["hands"]
             warnings += [f"{side} hand: {check}" for side, check in checks if not check.found]
         warnings += [str(w) for w in (doubt, work_limit_warning(labeling)) if w]
         if facts.get("forced") == 2:
@@ -252,7 +314,8 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
     naming = _naming(labeling, settings)
     if outputs.solve and solves is None:
         t = time.perf_counter()
-        solves = solve_hands(labeled, layout, naming, outputs.calibrations, progress=progress, **outputs.solve_options)
+        solves = solve_hands(labeled, layout, naming, outputs.calibrations, progress=progress, cache=cache,
+                             **outputs.solve_options)
         seconds["solve"] = round(time.perf_counter() - t, 4)
     filled = None
     if outputs.fill is not None:

@@ -48,8 +48,8 @@ def null_classes(labeling: Labeling, sure: float = SURE) -> np.ndarray:
     """int8 ``(frames, points)``: the class of each unassigned (null) sample's segment, -1 elsewhere.
 
     An unlabeled piece that the review queue leaves out by default (a short ghost that continues no
-    doubtful label: :func:`review_queue`) is confident: the ghosts the vote is sure about are not
-    shown as uncertain."""
+    doubtful label and lies far from every missing marker: :func:`review_queue`) is confident: the ghosts
+    the vote is sure about are not shown as uncertain."""
     classes = segment_classes(labeling, sure)
     queued = np.zeros(len(labeling), dtype=bool)
     queued[review_queue(labeling, sure)] = True
@@ -70,11 +70,106 @@ def uncertain_segments(labeling: Labeling, sure: float = SURE) -> np.ndarray:
 
 
 #: Unlabeled pieces shorter than this (frames) stay out of the review queue by default, unless they
-#: continue a labeled segment in doubt or are more likely a marker than not. On the temporal
-#: benchmark's 316 raw han2018 takes, 8,907 of the 9,643 uncertain unlabeled pieces were shorter; 11 of
-#: those were a marker's samples, 6 of them caught by the continuation rule (the 5 left out: 1-6 frames,
-#: each a gap in its marker). ``benchmarks/review.py`` measures the queue.
+#: continue a labeled segment in doubt, lie close to a marker the labeling lacks (:data:`QUEUE_NEAR_MM`)
+#: or are more likely a marker than not. On the temporal benchmark's 316 raw han2018 takes, 8,907 of the
+#: 9,643 uncertain unlabeled pieces were shorter; 11 of those were a marker's samples: 6 caught by the
+#: continuation rule, 3 by the distance to a missing marker (the 2 left out lie 28 and 35 mm from where
+#: their marker should be). ``benchmarks/review.py`` measures the queue.
 QUEUE_MIN_FRAMES = 10
+#: A short unlabeled piece is queued when one of its samples lies this close (mm) to where a marker that no
+#: trajectory carries in that frame should be (:func:`missing_marker_distance`): a marker seen for a few
+#: frames in the middle of its gap, which the vote left unlabeled. Where a hidden marker should be is only
+#: known to a centimetre or two, and flicker ghosts near the hand sometimes fall there too: on the
+#: benchmark's takes 25 mm catches most such markers while the short pieces it adds stay under a tenth of
+#: the queue (``benchmarks/review.py``).
+QUEUE_NEAR_MM = 25
+#: How far in time (seconds) a missing marker is followed from where it was last or is next seen.
+NEAR_WINDOW_S = 1.0
+#: Chunk of (frame, marker) predictions computed at once (bounds the memory of a long take).
+_CHUNK = 8192
+
+
+def _carried(at: np.ndarray, present: np.ndarray, hand: np.ndarray, frame: np.ndarray, seen: np.ndarray,
+             label: np.ndarray) -> np.ndarray:
+    """float ``(E, 3)``: where each ``label`` seen at frame ``seen`` is at ``frame``: its position there moved
+    as the other markers of its hand seen in both frames moved, the nearest to it weighing most
+    (inverse square of their distance plus 1 cm); unmoved where none is seen in both."""
+    rows = np.arange(len(label))
+    xs, xf = at[seen], at[frame]  # (E, L, 3)
+    both = present[frame] & present[seen] & (hand[None, :] == hand[label][:, None])
+    both[rows, label] = False
+    own = xs[rows, label]
+    apart = np.linalg.norm(np.where(both[..., None], xs - own[:, None], 0.0), axis=2)
+    weight = np.where(both, 1.0 / (apart + 0.01) ** 2, 0.0)
+    moved = (weight[..., None] * np.where(both[..., None], xf - xs, 0.0)).sum(axis=1)
+    total = weight.sum(axis=1)
+    return own + moved / np.where(total > 0, total, 1.0)[:, None]
+
+
+def missing_marker_distance(labeling: Labeling, positions: np.ndarray, hand_size: int, rate: float,
+                            window_s: float = NEAR_WINDOW_S) -> np.ndarray:
+    """int32 ``(S,)``: for each unlabeled segment, the distance (mm, rounded) from its nearest sample to where
+    a marker should be that no trajectory carries in that sample's frame; -1 for labeled segments and where no
+    marker is missing that was seen within ``window_s`` of that frame (:attr:`.labeling.Labeling.missing_mm`).
+
+    Where the missing marker should be: its last position before the frame and its next one after (those
+    within ``window_s``), each moved as its own hand's markers seen in both frames moved (:func:`_carried`),
+    blended by time. Labels ``h * hand_size`` to ``(h + 1) * hand_size - 1`` are hand ``h``'s.
+
+    Args:
+        positions: ``(F, P, 3)`` the take's samples (metres).
+    """
+    n, n_labels = len(labeling), len(labeling.names)
+    out = np.full(n, -1, dtype=np.int32)
+    per = labeling.per_sample()
+    null_f, null_s = np.nonzero(per == NULL)
+    if not len(null_f) or not n_labels:
+        return out
+    frames = labeling.n_frames
+    f_lab, s_lab = np.nonzero(per >= 0)
+    lab = per[f_lab, s_lab].astype(np.int64)
+    present = np.zeros((frames, n_labels), dtype=bool)
+    present[f_lab, lab] = True
+    at = np.full((frames, n_labels, 3), np.nan)
+    at[f_lab, lab] = positions[f_lab, s_lab]
+    hand = np.arange(n_labels) // max(int(hand_size), 1)
+    index = np.arange(frames)[:, None]
+    last = np.maximum.accumulate(np.where(present, index, -1), axis=0)
+    after = np.minimum.accumulate(np.where(present, index, frames)[::-1], axis=0)[::-1]
+    window = max(1, int(round(window_s * rate)))
+    # Every (frame with an unlabeled sample, marker missing there and seen within the window).
+    fr = np.unique(null_f)
+    before_ok = ~present[fr] & (last[fr] >= 0) & (fr[:, None] - last[fr] <= window)
+    after_ok = ~present[fr] & (after[fr] < frames) & (after[fr] - fr[:, None] <= window)
+    row, label = np.nonzero(before_ok | after_ok)
+    if not len(row):
+        return out
+    frame = fr[row]
+    a = np.where(before_ok[row, label], last[fr][row, label], after[fr][row, label])
+    b = np.where(after_ok[row, label], after[fr][row, label], a)
+    share = np.where(b > a, (frame - a) / np.maximum(b - a, 1), 0.0)[:, None]
+    where = np.empty((len(frame), 3))
+    for c in range(0, len(frame), _CHUNK):
+        part = slice(c, c + _CHUNK)
+        from_a = _carried(at, present, hand, frame[part], a[part], label[part])
+        from_b = _carried(at, present, hand, frame[part], b[part], label[part])
+        where[part] = from_a * (1.0 - share[part]) + from_b * share[part]
+    # Each unlabeled sample against every prediction of its frame (null_f is sorted, as frame is).
+    lo, hi = np.searchsorted(frame, null_f, side="left"), np.searchsorted(frame, null_f, side="right")
+    count = hi - lo
+    has = count > 0
+    sample = np.repeat(np.flatnonzero(has), count[has])
+    pred = np.repeat(lo[has], count[has]) + np.arange(int(count[has].sum())) - \
+        np.repeat(np.cumsum(count[has]) - count[has], count[has])
+    dist = np.linalg.norm(where[pred] - positions[null_f[sample], null_s[sample]].astype(np.float64), axis=1)
+    nearest = np.full(len(null_f), np.inf)
+    np.minimum.at(nearest, sample, dist)
+    seg = labeling.segment_ids()[null_f, null_s]
+    best = np.full(n, np.inf)
+    np.minimum.at(best, seg, nearest)
+    known = np.isfinite(best)
+    out[known] = np.minimum(np.rint(best[known] * 1000.0), np.iinfo(np.int32).max).astype(np.int32)
+    return out
 
 
 def _touches(slot: np.ndarray, start: np.ndarray, stop: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -88,9 +183,10 @@ def _touches(slot: np.ndarray, start: np.ndarray, stop: np.ndarray, mask: np.nda
 
 
 def rank_segments(slot, start, stop, label, confidence, locked, sure: float = SURE, *, labeled_only: bool = False,
-                  min_frames: int = QUEUE_MIN_FRAMES) -> np.ndarray:
+                  min_frames: int = QUEUE_MIN_FRAMES, missing_mm=None, near_mm: int = QUEUE_NEAR_MM) -> np.ndarray:
     """The review queue over plain per-segment arrays (see :func:`review_queue`): the indices of the
-    segments to show, in the order to look at them."""
+    segments to show, in the order to look at them. ``missing_mm``: each segment's distance to a missing
+    marker (:attr:`.labeling.Labeling.missing_mm`), or None where not known."""
     slot, start, stop = (np.asarray(a, dtype=np.int64).reshape(-1) for a in (slot, start, stop))
     label = np.asarray(label, dtype=np.int64).reshape(-1)
     confidence = np.asarray(confidence, dtype=np.float64).reshape(-1)
@@ -101,21 +197,26 @@ def rank_segments(slot, start, stop, label, confidence, locked, sure: float = SU
     shown = labeled.copy()
     ghost = unsure & (label < 0)
     cut = ghost & _touches(slot, start, stop, labeled)
+    near = np.zeros(len(slot), dtype=bool)
+    if missing_mm is not None:
+        mm = np.asarray(missing_mm, dtype=np.int64).reshape(-1)
+        near = ghost & (mm >= 0) & (mm <= near_mm)
     if not labeled_only:
-        shown |= ghost & ((length >= min_frames) | (confidence < DOUBTFUL) | cut)
+        shown |= ghost & ((length >= min_frames) | (confidence < DOUBTFUL) | cut | near)
     idx = np.flatnonzero(shown)
     ghost = label[idx] < 0
     # Labeled first, least confident first, then shortest (short labels are the likeliest wrong: a
     # quarter of the 1-9-frame ones were wrong on the temporal benchmark's takes, under 1 % of those of 30
     # frames or more); then unlabeled pieces: those cut from a doubtful label's trajectory (each of the 6 on
-    # those takes was a marker's samples), then least sure they are no marker, then longest. Ties by start, slot.
-    # Confidence as reports round it (4 decimals): a report's entries rank as the labeling's (queue_entries).
+    # those takes was a marker's samples), then those close to a missing marker, then least sure they are no
+    # marker, then longest. Ties by start, slot. Confidence as reports round it (4 decimals): a report's
+    # entries rank as the labeling's (queue_entries).
     by_length, doubt = np.where(ghost, -length[idx], length[idx]), np.round(confidence[idx], 4)
-    return idx[np.lexsort((slot[idx], start[idx], by_length, doubt, ~cut[idx], ghost))]
+    return idx[np.lexsort((slot[idx], start[idx], by_length, doubt, ~near[idx], ~cut[idx], ghost))]
 
 
 def review_queue(labeling: Labeling, sure: float = SURE, *, labeled_only: bool = False,
-                 min_frames: int = QUEUE_MIN_FRAMES) -> np.ndarray:
+                 min_frames: int = QUEUE_MIN_FRAMES, near_mm: int = QUEUE_NEAR_MM) -> np.ndarray:
     """Indices of the segments a reviewer should look at, in the order to look at them: the one list
     behind the panel's list, Previous / Next, the Timeline's marks and the HTML report.
 
@@ -125,35 +226,45 @@ def review_queue(labeling: Labeling, sure: float = SURE, *, labeled_only: bool =
        for, and short labels are the likeliest wrong;
     2. then the unlabeled pieces that may be a marker: those that continue a labeled segment in doubt
        first (the vote cut one trajectory between a doubtful label and no label: one of the two is
-       likely wrong), then least sure, then longest. An unlabeled piece's confidence is how sure the
-       vote is that it is no marker (the calibrated chance that leaving it unlabeled is right). It is
-       shown when it continues a labeled segment in doubt, when it is ``min_frames`` long or longer,
-       or when it is more likely a marker than not (below :data:`DOUBTFUL`). Shorter ghosts are the
-       flicker and spurious reflections that the vote leaves unlabeled: they do not appear as
-       uncertain (:func:`null_classes`).
+       likely wrong), then those close to a marker the labeling lacks, then least sure, then longest.
+       An unlabeled piece's confidence is how sure the vote is that it is no marker (the calibrated
+       chance that leaving it unlabeled is right). It is shown when it continues a labeled segment in
+       doubt, when it is ``min_frames`` long or longer, when a sample of it lies within ``near_mm`` of
+       where a marker no trajectory carries in that frame should be (a marker seen again for a few frames
+       in its gap: :attr:`.labeling.Labeling.missing_mm`; a labeling that does not know it, stored before
+       it was recorded, goes without this rule), or when it is more likely a marker than not (below
+       :data:`DOUBTFUL`). Other short ghosts are the flicker and spurious reflections that the vote leaves
+       unlabeled: they do not appear as uncertain (:func:`null_classes`).
 
     Args:
         labeled_only: labeled segments alone.
         min_frames: the shortest unlabeled piece shown for its length alone.
+        near_mm: the farthest a short piece may lie from a missing marker to be shown for it (-1: none).
     """
     return rank_segments(labeling.slot, labeling.start, labeling.stop, labeling.label, labeling.confidence,
-                         labeling.locked, sure, labeled_only=labeled_only, min_frames=min_frames)
+                         labeling.locked, sure, labeled_only=labeled_only, min_frames=min_frames,
+                         missing_mm=labeling.missing_mm, near_mm=near_mm)
 
 
 def queue_entries(segments: list[dict], *, labeled_only: bool = False,
-                  min_frames: int = QUEUE_MIN_FRAMES) -> list[dict]:
+                  min_frames: int = QUEUE_MIN_FRAMES, near_mm: int = QUEUE_NEAR_MM) -> list[dict]:
     """The review queue of a report's uncertain segments (``Labeling.summary()["uncertain_segments"]``:
-    dicts with ``slot``, ``start``, ``stop``, ``label`` (None: unlabeled) and ``confidence``), in the order
-    of :func:`review_queue`. Every given segment counts as uncertain (the report chose them at its own
-    threshold), and the labeled segments a piece may continue are among them: the result is the
-    labeling's :func:`review_queue` at that threshold."""
+    dicts with ``slot``, ``start``, ``stop``, ``label`` (None: unlabeled), ``confidence`` and, for an
+    unlabeled one where the labeling knew it, ``missing_mm``), in the order of :func:`review_queue`. Every
+    given segment counts as uncertain (the report chose them at its own threshold), and the labeled segments
+    a piece may continue are among them: the result is the labeling's :func:`review_queue` at that
+    threshold. A report without ``missing_mm`` (written before it was recorded) ranks without that rule."""
     if not segments:
         return []
     col = {k: np.array([s[k] for s in segments]) for k in ("slot", "start", "stop", "confidence")}
     label = np.array([NULL if s["label"] is None else 0 for s in segments])
+    unlabeled = [s for s in segments if s["label"] is None]
+    missing = None
+    if unlabeled and all("missing_mm" in s for s in unlabeled):
+        missing = np.array([-1 if s["label"] is not None else s["missing_mm"] for s in segments])
     order = rank_segments(col["slot"], col["start"], col["stop"], label, col["confidence"],
                           np.zeros(len(segments), dtype=bool), np.inf, labeled_only=labeled_only,
-                          min_frames=min_frames)
+                          min_frames=min_frames, missing_mm=missing, near_mm=near_mm)
     return [segments[i] for i in order]
 
 
@@ -317,14 +428,20 @@ def _paint_flags(labeling: Labeling) -> np.ndarray:
 
 
 def _rebuild(labeling: Labeling, per: np.ndarray, conf: np.ndarray, locked: np.ndarray,
-             cut: np.ndarray) -> Labeling:
+             cut: np.ndarray, edited: np.ndarray | None = None) -> Labeling:
     """A Labeling from edited per-sample arrays: a segment starts at every old segment start, at
-    every ``cut`` and wherever the label changes; its confidence and lock come from its first sample."""
+    every ``cut`` and wherever the label changes; its confidence, lock and distance to a missing marker
+    come from its first sample (no distance where that sample was ``edited``)."""
     begin = np.zeros(per.shape, dtype=bool)
     begin[labeling.start, labeling.slot] = True
     out = segments_from_runs(labeling.names, per, per != EMPTY, dict(labeling.info), split=begin | cut)
     out.confidence = conf[out.start, out.slot].astype(np.float32)
     out.locked = locked[out.start, out.slot]
+    if labeling.missing_mm is not None:
+        missing = labeling._paint(labeling.missing_mm, -1, np.int32)
+        if edited is not None:
+            missing[edited] = -1
+        out.missing_mm = np.where(out.label < 0, missing[out.start, out.slot], -1).astype(np.int32)
     return out
 
 
@@ -334,7 +451,8 @@ def apply_constraints(labeling: Labeling, constraints: list[Constraint]) -> Labe
     Each constraint's samples get its label, confidence 1 and the lock. A label given to a slot is
     taken from whichever other slot carried it in those frames: those samples become null with
     confidence 0 (very uncertain: a re-solve may find them another label). Evidence is dropped
-    (it described the old segments).
+    (it described the old segments); an unlabeled segment's distance to a missing marker is kept where
+    its samples were not edited.
     """
     per = labeling.per_sample()
     conf = labeling.per_sample_confidence()
@@ -356,7 +474,7 @@ def apply_constraints(labeling: Labeling, constraints: list[Constraint]) -> Labe
     cut = np.zeros(per.shape, dtype=bool)
     cut[1:] = changed[1:] != changed[:-1]
     cut[0] = changed[0]
-    out = _rebuild(labeling, per, conf, locked, cut)
+    out = _rebuild(labeling, per, conf, locked, cut, changed)
     out.info["constraints"] = labeling.info.get("constraints", 0) + len(constraints)
     return out
 
@@ -369,19 +487,28 @@ def apply_split(labeling: Labeling, slot: int, frame: int) -> Labeling:
 
 
 def labeling_to_arrays(labeling: Labeling) -> dict:
-    """The Labeling as flat arrays plus its names and shape, for storage (see :func:`labeling_from_arrays`)."""
-    return {"names": list(labeling.names), "n_frames": labeling.n_frames, "n_points": labeling.n_points,
-            "slot": labeling.slot, "start": labeling.start, "stop": labeling.stop, "label": labeling.label,
-            "confidence": labeling.confidence, "locked": labeling.locked}
+    """The Labeling as flat arrays plus its names and shape, for storage (see :func:`labeling_from_arrays`):
+    ``missing_mm`` (integers) only where the labeling knows it."""
+    out = {"names": list(labeling.names), "n_frames": labeling.n_frames, "n_points": labeling.n_points,
+           "slot": labeling.slot, "start": labeling.start, "stop": labeling.stop, "label": labeling.label,
+           "confidence": labeling.confidence, "locked": labeling.locked}
+    if labeling.missing_mm is not None:
+        out["missing_mm"] = labeling.missing_mm
+    return out
 
 
 def labeling_from_arrays(data, info: dict | None = None) -> Labeling:
-    """Inverse of :func:`labeling_to_arrays` (any mapping whose arrays numpy can read)."""
+    """Inverse of :func:`labeling_to_arrays` (any mapping whose arrays numpy can read). Stored without
+    ``missing_mm`` (before it was recorded), or with one of another length, the labeling does not know it."""
+    slot = np.asarray(data["slot"], dtype=np.int64)
+    missing = np.asarray(data["missing_mm"], dtype=np.int32).reshape(-1) if "missing_mm" in data else None
+    if missing is not None and missing.shape != slot.shape:
+        missing = None
     return Labeling(names=list(data["names"]), n_frames=int(data["n_frames"]), n_points=int(data["n_points"]),
-                    slot=np.asarray(data["slot"], dtype=np.int64), start=np.asarray(data["start"], dtype=np.int64),
+                    slot=slot, start=np.asarray(data["start"], dtype=np.int64),
                     stop=np.asarray(data["stop"], dtype=np.int64), label=np.asarray(data["label"], dtype=np.int16),
                     confidence=np.asarray(data["confidence"], dtype=np.float32),
-                    locked=np.asarray(data["locked"], dtype=bool), info=dict(info or {}))
+                    locked=np.asarray(data["locked"], dtype=bool), info=dict(info or {}), missing_mm=missing)
 
 
 def changed_labels(before: Labeling, after: Labeling, sure_before: float = SURE,

@@ -137,6 +137,7 @@ def _splice(parts: list[Labeling], offsets: list[int], cuts: list[int], names: l
     ``offsets[i]`` of the whole) kept from ``cuts[i]`` to ``cuts[i + 1]``; labels mapped by name to
     ``names``. ``info`` is left empty."""
     index = {name: i for i, name in enumerate(names)}
+    known = all(part.missing_mm is not None for part in parts)  # each unlabeled piece's distance to a missing marker
     pieces = []
     for i, (part, start) in enumerate(zip(parts, offsets)):
         lo, hi = cuts[i] - start, cuts[i + 1] - start
@@ -147,13 +148,14 @@ def _splice(parts: list[Labeling], offsets: list[int], cuts: list[int], names: l
         a, b = np.maximum(part.start[keep], lo), np.minimum(part.stop[keep], hi)
         evidence = evidence.copy()
         evidence[:, 3] = b - a
+        missing = part.missing_mm[keep] if known else np.full(int(keep.sum()), -1, np.int32)
         pieces.append((part.slot[keep], a + start, b + start,
                        np.where(label >= 0, to_global[np.maximum(label, 0)], label),
-                       part.confidence[keep], part.locked[keep], evidence))
-    slot, start, stop, label, confidence, locked, evidence = (np.concatenate(c) for c in zip(*pieces))
+                       part.confidence[keep], part.locked[keep], evidence, missing))
+    slot, start, stop, label, confidence, locked, evidence, missing = (np.concatenate(c) for c in zip(*pieces))
     order = np.lexsort((start, slot))
-    slot, start, stop, label, confidence, locked, evidence = (
-        a[order] for a in (slot, start, stop, label, confidence, locked, evidence))
+    slot, start, stop, label, confidence, locked, evidence, missing = (
+        a[order] for a in (slot, start, stop, label, confidence, locked, evidence, missing))
     # A trajectory both parts gave one label (locked by both or by neither) stays one segment: the
     # lower confidence, the evidence of both weighed by their frames.
     joins = np.flatnonzero((slot[1:] == slot[:-1]) & (start[1:] == stop[:-1]) & (label[1:] == label[:-1])
@@ -164,12 +166,15 @@ def _splice(parts: list[Labeling], offsets: list[int], cuts: list[int], names: l
         evidence[j, 3] = w.sum()
         stop[j] = stop[j + 1]
         confidence[j] = min(confidence[j], confidence[j + 1])
+        both = missing[j:j + 2]
+        missing[j] = both[both >= 0].min() if (both >= 0).any() else -1  # the nearer
     keep = np.ones(len(slot), dtype=bool)
     keep[joins + 1] = False
     return Labeling(names=list(names), n_frames=n_frames, n_points=n_points, slot=slot[keep],
                     start=start[keep], stop=stop[keep], label=label[keep].astype(np.int16),
                     confidence=confidence[keep].astype(np.float32), locked=locked[keep], info={},
-                    evidence=evidence[keep].astype(np.float32))
+                    evidence=evidence[keep].astype(np.float32),
+                    missing_mm=missing[keep].astype(np.int32) if known else None)
 
 
 def _join(take: Take, parts: list[Labeling], bounds, cuts: list[int], names: list[str]) -> Labeling:

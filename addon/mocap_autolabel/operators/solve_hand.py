@@ -35,6 +35,7 @@ class SolveRequest:
     smooth_hz: float = 10.0
     share: float = 0.0  # of the work done, set as the solve goes
     naming: object = None  # the take's HandNaming (None: any built-in convention)
+    cache: object = None  # the take's session cache: a calibration on the same labels is made once
     digests: dict | None = None  # per side, the frame digests of the markers solved (set by run)
 
     def run(self, say=None):
@@ -55,7 +56,8 @@ class SolveRequest:
         outputs = Outputs(label=False, solve=True, calibrations=calibrations,
                           solve_options={"smooth_hz": self.smooth_hz})
         naming = None if self.naming is None else self.naming.template
-        result = process_take(self.take, self.layout, LabelSettings(naming=naming), outputs, progress=progress)
+        result = process_take(self.take, self.layout, LabelSettings(naming=naming), outputs, progress=progress,
+                              cache=self.cache)
         from ..core.fill import solve_digests
 
         self.digests = solve_digests(self.take, self.layout, self.naming)
@@ -135,7 +137,11 @@ class MOCAPAL_OT_solve_hand(JobModal, bpy.types.Operator):
             return None
         take, layout, source, scale = found
         calibration = Calibration.load(bpy.path.abspath(self.calibration)) if self.calibration else None
-        return SolveRequest(take, layout, source, scale, calibration, self.smooth_hz, naming=self._naming(context))
+        from ..blender.session import session
+
+        coll = bpy.data.collections.get(source)
+        return SolveRequest(take, layout, source, scale, calibration, self.smooth_hz, naming=self._naming(context),
+                            cache=session(coll).cache if coll is not None else None)
 
     def _naming(self, context):
         """The side naming of the reviewed take's labels (a custom pattern included), else None."""
