@@ -14,10 +14,10 @@ from bpy.props import BoolProperty, EnumProperty, StringProperty
 
 from ..blender.properties import HANDS_ITEMS, LAYOUT_DEFAULT, TEMPORAL_ITEMS, _layouts, _methods
 from .common import _not_a_take, _present, panel_take
-from .modal import start_modal
+from .modal import JobModal, start_modal
 
 
-class MOCAPAL_OT_label(bpy.types.Operator):
+class MOCAPAL_OT_label(JobModal, bpy.types.Operator):
     """Label the take in the panel's Take field: every trajectory gets a marker name or is set aside as
     unlabeled, with its confidence shown as keyframe types"""
 
@@ -167,28 +167,15 @@ class MOCAPAL_OT_label(bpy.types.Operator):
             return self._fail(exc, coll_name)
         return start_modal(self, context, Job(lambda say: self._pending.run(say, check_layout=True)))
 
-    def modal(self, context, event):
-        job = self._job
-        if event.type == "ESC" and event.value == "PRESS":
-            job.cancel()
-        if event.type != "TIMER":
-            return {"PASS_THROUGH"}
-        if not job.done:
-            request = self._pending
-            context.workspace.status_text_set(f"Labeling {request.take_name}: {request.stage or job.message}, "
-                                              f"{request.done * 100:.0f} % done ({job.elapsed:.1f} s) - Esc to cancel")
-            context.window_manager.progress_update(int(request.done * 100))
-            return {"PASS_THROUGH"}
-        wm = context.window_manager
-        wm.event_timer_remove(self._timer)
-        wm.progress_end()
-        context.workspace.status_text_set(None)
-        if job.cancelled:
-            self.report({"WARNING"}, "Labeling cancelled; the scene is unchanged")
-            return {"CANCELLED"}
-        if job.error is not None:
-            return self._fail(job.error, self._pending.take_name)
-        return self._finish(context, self._pending, job.result)
+    def _progress(self, job) -> tuple[str, float]:
+        request = self._pending
+        return f"Labeling {request.take_name}: {request.stage or job.message}", request.done
+
+    def _job_failed(self, exc):
+        return self._fail(exc, self._pending.take_name)
+
+    def _job_done(self, context, labeling):
+        return self._finish(context, self._pending, labeling)
 
 
 def _printer():
