@@ -14,7 +14,6 @@ from typing import ClassVar
 import numpy as np
 
 from ..labeling import EMPTY, NULL, Labeling, segments_from_runs
-from ..review import missing_marker_distance
 from ..temporal.confidence import (
     load_calibration,
     load_continuity,
@@ -212,11 +211,8 @@ def fitted_settings(run: LabelRun) -> None:
 
 def calibrate_confidence(run: LabelRun, labeling: Labeling, samples: Samples) -> Labeling:
     """Each segment's evidence and its confidence: the mean probability, mapped through the shipped
-    calibration for this method, mode and layout where one exists (locked segments are certain); and each
-    unlabeled segment's distance to a marker the labeling lacks (the review queue's, see
-    ``core/review.py: missing_marker_distance``)."""
+    calibration for this method, mode and layout where one exists (locked segments are certain)."""
     s = run.settings
-    labeling.missing_mm = missing_marker_distance(labeling, run.take.positions, run.labels.m, run.take.rate)
     labeling.evidence = segment_evidence(labeling, samples)
     labeling.confidence = labeling.evidence[:, 0].copy()  # the mean probability, until calibrated
     calibration = load_calibration(s.method, s.temporal, run.layout.name) if s.calibrate_confidence else None
