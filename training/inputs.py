@@ -66,16 +66,18 @@ class Method:
                               input_names=self.input_names, output_names=[output_name], dynamic_axes=axes)
 
 
-def matching_loss(out: torch.Tensor, labels: np.ndarray, mask: torch.Tensor, m: int) -> torch.Tensor:
+def matching_loss(out: torch.Tensor, labels: np.ndarray | torch.Tensor, mask: torch.Tensor, m: int) -> torch.Tensor:
     """Negative log-likelihood of the true matching under Sinkhorn couplings with dustbins:
     ``out`` ``(B, K+1, M+1)`` log-probabilities, ``labels`` ``(B, K)`` (label, -1 ghost, -2 padding),
     ``mask`` ``(B, K)``; every observation's row, and the occlusion row of every missing label."""
-    labels = torch.from_numpy(labels.astype(np.int64))
+    if isinstance(labels, np.ndarray):
+        labels = torch.from_numpy(labels.astype(np.int64))
+    labels = labels.to(out.device, torch.int64)
     k = labels.shape[1]
     target = torch.where(labels >= 0, labels, torch.full_like(labels, m))
     obs = out[:, :k].gather(2, target[..., None])[..., 0]
     obs_loss = -(obs * mask).sum() / mask.sum()
-    present = torch.zeros(labels.shape[0], m + 1)
+    present = torch.zeros(labels.shape[0], m + 1, device=out.device)
     present.scatter_(1, torch.where(mask > 0.5, target, torch.full_like(target, m)), 1.0)
     missing = 1.0 - present[:, :m]
     occ_loss = -(out[:, k, :m] * missing).sum() / missing.sum().clamp(min=1.0)

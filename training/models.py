@@ -117,10 +117,10 @@ class SetLabeler(nn.Module):
         dist = torch.sqrt(torch.relu(sq[:, :, None] + sq[:, None, :] - 2.0 * centred @ centred.transpose(1, 2)) + 1e-12)
         pair_ok = mask[:, :, None] * mask[:, None, :]
         far = torch.where(pair_ok > 0.5, dist, torch.full_like(dist, 1.0))
-        far = far + torch.eye(k, dtype=dist.dtype)[None] * 1.0  # a point is not its own neighbour
+        far = far + torch.eye(k, dtype=dist.dtype, device=dist.device)[None] * 1.0  # a point is not its own neighbour
         near = torch.topk(far, min(self.knn, k), dim=2, largest=False).values
         if k < self.knn:
-            near = torch.cat([near, torch.ones(b, k, self.knn - k, dtype=near.dtype)], dim=2)
+            near = torch.cat([near, torch.ones(b, k, self.knn - k, dtype=near.dtype, device=near.device)], dim=2)
         radial = torch.sqrt(sq + 1e-12)
         # |coordinates| on the principal axes: blind to the axes' arbitrary signs (and to mirroring).
         canon = torch.abs(centred @ axes) * 10.0
