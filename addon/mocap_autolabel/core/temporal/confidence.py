@@ -29,12 +29,13 @@ LENGTH_EDGES = (5, 30)
 #: to users is 99.9 %. A margin (99.95 %) moved the real figure by only 0.01 points, and one
 #: wrong segment scored near the top then left no segment sure at all.
 SURE, SURE_ACCURACY = 0.95, 0.999
-#: A marker label held for fewer than this many frames (the first length band) is never "sure",
-#: whatever its evidence: every sure-but-wrong segment seen on the han2018 raw takes (8 over two
-#: model versions) was a 2-6-frame ghost with perfect per-frame evidence, sitting where a hidden
-#: marker would be. Such labels are few and quick to check. Null decisions of short ghosts keep
-#: their calibration, and the sure threshold is fitted on the segments that may be sure.
-SHORT_LABEL = LENGTH_EDGES[0]
+#: A marker label held for fewer than this many frames is never "sure", whatever its evidence: every
+#: sure-but-wrong label seen on the han2018 raw takes (8 over two model versions, then 3 of the 117 sure
+#: labels of 5-10 frames) was a 2-10-frame ghost with perfect per-frame evidence, sitting where a hidden
+#: marker would be: short labels fall short of the promise (:data:`SURE_ACCURACY`). Such labels are few
+#: and quick to check. Null decisions of short ghosts keep their calibration, and the sure threshold is
+#: fitted on the segments that may be sure.
+SHORT_LABEL = 11
 
 
 EVIDENCE = ("mean probability", "agreement", "margin", "length")
