@@ -108,6 +108,8 @@ class SetMethod(Method):
     def loss(self, net: torch.nn.Module, frames: LabeledFrames) -> torch.Tensor:
         """Negative log-likelihood of the true matching under the Sinkhorn couplings (with dustbins)."""
         inputs, _ = self.feeds(frames)
+        device = next(net.parameters()).device
+        inputs = tuple(t.to(device) for t in inputs)
         mask = inputs[1]
         out = net(*inputs)  # (B, K+1, M+1)
         return matching_loss(out, frames.labels, mask, self.m)

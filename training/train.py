@@ -118,12 +118,14 @@ def _batches(pool: LabeledFrames, size: int, rng: np.random.Generator) -> list[L
 COMPILE_FROM_STEPS = 2000
 
 
-def train(layout: Layout, recipe: Recipe, progress: Callable | None = _progress) -> tuple[torch.nn.Module, dict]:
-    """Train one model of ``recipe.method`` for ``layout`` on synthetic frames; returns it and its metrics."""
+def train(layout: Layout, recipe: Recipe, progress: Callable | None = _progress, *,
+          device: str = "cpu") -> tuple[torch.nn.Module, dict]:
+    """Train one model of ``recipe.method`` for ``layout`` on synthetic frames; returns it (on the CPU) and
+    its metrics. ``device``: where the steps run (``"cuda"`` on a GPU machine; ``set`` only, not compiled)."""
     torch.manual_seed(recipe.seed)
     rng = np.random.default_rng(recipe.seed)
     method = get_method(recipe.method, layout.names, **recipe.model)
-    net = method.build()
+    net = method.build().to(device)
     opt = torch.optim.AdamW(net.parameters(), lr=recipe.lr, weight_decay=recipe.weight_decay)
     warm = max(1, recipe.steps // 20)
 
@@ -134,7 +136,8 @@ def train(layout: Layout, recipe: Recipe, progress: Callable | None = _progress)
     cfg = FrameConfig(**recipe.frames)
     val = validation_frames(layout, recipe)
     started = time.perf_counter()
-    step_net = torch.compile(net, dynamic=True) if recipe.compile and recipe.steps >= COMPILE_FROM_STEPS else net
+    compiled = recipe.compile and recipe.steps >= COMPILE_FROM_STEPS and device == "cpu"
+    step_net = torch.compile(net, dynamic=True) if compiled else net
     batches: list[LabeledFrames] = []
     ema = None
     for step in range(recipe.steps):
@@ -161,6 +164,7 @@ def train(layout: Layout, recipe: Recipe, progress: Callable | None = _progress)
         if progress and (step % 10 == 0 or step == recipe.steps - 1):
             progress(step + 1, recipe.steps, started, ema)
     seconds = time.perf_counter() - started
+    net = net.cpu()
     offset, val_score = evaluate(method, net, layout, val)
     metrics = {"synthetic_validation": val_score, "null_offset": offset, "train_seconds": round(seconds, 1)}
     net.eval()
