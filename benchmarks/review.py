@@ -34,11 +34,13 @@ from mocap_autolabel.core.metrics import segments_right  # noqa: E402
 from mocap_autolabel.core.review import (  # noqa: E402
     QUEUE_MIN_FRAMES,
     QUEUE_NEAR_MM,
+    THUMB_SLACK_MM,
     review_queue,
     uncertain_segments,
 )
 from mocap_autolabel.core.synth.generate import synthesize  # noqa: E402
 from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take  # noqa: E402
+from mocap_autolabel.core.temporal.confidence import SHORT_LABEL  # noqa: E402
 
 REPORT = os.path.join(os.path.dirname(__file__), "reports", "review.md")
 DEMO = os.path.join(os.path.dirname(__file__), "..", "samples", "demo_take.c3d")
@@ -64,7 +66,7 @@ def queue_figures(labeling, take, truth) -> dict:
     queued[queue] = True
     labeled = labeling.label >= 0
     length = labeling.length
-    missed = wrong & unsure & ~queued
+    missed = wrong & ~queued
     # A left-out wrong piece whose true label no trajectory carries in any of its frames: a gap in that marker.
     per = labeling.per_sample()
     gap = 0
@@ -173,11 +175,16 @@ def queue_lines(sets: dict[str, dict], hands: int) -> list[str]:
              "(`core/review.py: review_queue`): every labeled segment below Confident at (0.95), least confident "
              "then shortest first; then the unlabeled pieces that may be a marker: at least "
              f"{QUEUE_MIN_FRAMES} frames long, or continuing a labeled segment in doubt on the same trajectory, "
-             f"or within {QUEUE_NEAR_MM} mm of where a marker no trajectory carries in that frame should be "
-             "(`missing_marker_distance`: a marker seen for a few frames in its gap), or more likely a marker "
-             "than not. The old list held every uncertain segment. Wrong: a segment not every sample of which "
-             "carries its true label (`core/metrics.py: segments_right`); 'in doubt': below 0.95 (a wrong "
-             "segment at 0.95 or more is in neither list).", "",
+             f"or within {QUEUE_NEAR_MM} mm ({QUEUE_NEAR_MM + THUMB_SLACK_MM} mm for a thumb marker) of where a "
+             "marker no trajectory carries in that frame should be (`missing_marker_distance`: a marker seen for "
+             "a few frames in its gap), or more likely a marker than not. A label held for fewer than "
+             f"{SHORT_LABEL} frames is never sure, and the frames at a labeled segment's edges that the rest of it "
+             "cannot vouch for are segments of their own (`core/temporal/confidence.py: split_doubtful_edges`: "
+             "up to 3 frames the per-frame labeler gives another label, and the unscored frames beside a swap "
+             "the vote placed between scored frames); labels do not change. The old list held every uncertain "
+             "segment. Wrong: a segment not every sample of which carries its true label (`core/metrics.py: "
+             "segments_right`); 'in doubt': below 0.95; 'left out': wrong segments not in the queue, in doubt "
+             "or not.", "",
              "| takes | old list | queue | labeled or >= 10 frames | wrong in doubt | of them in the queue | "
              "wrong labeled in the queue | wrong samples in the queue | left out (frames, mm to a missing marker) "
              "| of them gaps |",
@@ -190,12 +197,12 @@ def queue_lines(sets: dict[str, dict], hands: int) -> list[str]:
                      f"{f['wrong_labeled_queued']} of {f['wrong_labeled']} | "
                      f"{f['wrong_samples_queued']:,} of {f['wrong_samples']:,} | {missed} | {f['missed_gaps']} |")
     shares = [(f["queue_labeled"] + f["queue_long"]) / max(f["queue"], 1) for f in sets.values()]
-    left = sum(f["wrong_unsure"] - f["wrong_queued"] for f in sets.values())
-    unlabeled = sum(f["wrong_unsure"] - f["wrong_labeled"] for f in sets.values())
+    left = sum(f["wrong"] - f["wrong_queued"] for f in sets.values())
+    wrong = sum(f["wrong"] for f in sets.values())
     lines += ["", f"Bars (issue 48): at least 90 % of the entries labeled or >= 10 frames: "
               f"{'met' if min(shares) >= 0.9 else 'NOT met'} (lowest {100 * min(shares):.1f} %); every wrong "
-              f"segment in doubt in the queue: {'met' if not left else 'met for the labeled ones, not for'} "
-              + (f"{left} of the {unlabeled} wrong unlabeled pieces." if left else "(all of them).")]
+              f"segment in the queue: " + (f"NOT met ({left} of {wrong} left out)." if left else
+                                             f"met ({wrong} of {wrong}).")]
     sweep = sorted({*NEAR_SWEEP, QUEUE_NEAR_MM})
     lines += ["", "The distance to a missing marker, against the queue's length and what it holds (off: the queue "
               "before this rule; entries, the share labeled or >= 10 frames, the wrong segments in doubt it "
@@ -213,10 +220,11 @@ def queue_lines(sets: dict[str, dict], hands: int) -> list[str]:
               "of 1-9 frames that were a marker's samples are nearly all a marker seen again for a few frames in "
               "the middle of its gap (\"of them gaps\": no trajectory carries the marker's label in those frames); "
               "the queue finds them by where that marker should be: its last and next positions (within "
-              "1 s), moved as its hand's other markers moved. What it still leaves out lies farther than "
-              f"{QUEUE_NEAR_MM} mm from that (a marker far from where it was, or one whose label another "
-              "trajectory took: 'none' where no marker was missing near in time); a flicker ghost sits as close "
-              "to a hidden marker as often, so a wider reach adds mostly ghosts (the table above). The "
+              "1 s), moved as its hand's other markers moved; a thumb marker, which moves against the fingers "
+              "that carry it, is given more room. What it would leave out lies farther than that (a marker far "
+              "from where it was, or one whose label another trajectory took: 'none' where no marker was missing "
+              "near in time); a flicker ghost sits as close to a hidden marker as often, so a wider reach adds "
+              "mostly ghosts (the table above). The "
               "Timeline's marks count missing labels, and gap filling fills them. Unlabeled From 1 (the panel) "
               "or `min_frames=1` shows every uncertain piece, as the old list did."]
     return lines

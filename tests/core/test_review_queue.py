@@ -12,11 +12,13 @@ import os
 import numpy as np
 import pytest
 from mocap_autolabel.core.labeling import NULL, Constraint, Labeling, segments_from_runs
+from mocap_autolabel.core.layout import Layout, Marker
 from mocap_autolabel.core.metrics import segments_right
 from mocap_autolabel.core.review import (
     CONFIDENT,
     QUEUE_MIN_FRAMES,
     QUEUE_NEAR_MM,
+    THUMB_SLACK_MM,
     UNCERTAIN,
     VERY_UNCERTAIN,
     apply_constraints,
@@ -24,6 +26,7 @@ from mocap_autolabel.core.review import (
     frame_trouble,
     labeling_from_arrays,
     labeling_to_arrays,
+    marker_slack,
     missing_marker_distance,
     null_classes,
     queue_entries,
@@ -273,3 +276,20 @@ def test_two_hand_takes_queue_every_wrong_segment_in_doubt_and_mostly_what_matte
     assert len(queue) < len(uncertain_segments(lab)) and _share_worth_a_look(lab, queue) >= 0.85
     worth = (lab.label[queue] >= 0) | (lab.length[queue] >= QUEUE_MIN_FRAMES) | wrong[queue]
     assert worth.mean() >= 0.95
+
+
+def test_a_thumb_marker_is_given_more_room_than_the_others():
+    lab, pos = _hidden_marker_take()
+    pos = pos.copy()
+    pos[14:16, 2] += [0.028, 0.0, 0.0]  # the piece 30 mm off where the hidden "a" should be
+    plain = missing_marker_distance(lab, pos, hand_size=2, rate=100.0)[_seg(lab, 2)]
+    assert QUEUE_NEAR_MM < plain <= QUEUE_NEAR_MM + THUMB_SLACK_MM
+    thumb = Layout("t", (Marker("a", "thumb_dist"), Marker("b", "index_dist")))
+    slack = marker_slack(thumb)
+    np.testing.assert_array_equal(slack, [THUMB_SLACK_MM, 0.0])
+    given = missing_marker_distance(lab, pos, hand_size=2, rate=100.0, slack_mm=slack)[_seg(lab, 2)]
+    assert given == plain - THUMB_SLACK_MM
+    lab.missing_mm = missing_marker_distance(lab, pos, hand_size=2, rate=100.0)
+    assert _seg(lab, 2) not in review_queue(lab)  # as far from a finger marker: not queued
+    lab.missing_mm = missing_marker_distance(lab, pos, hand_size=2, rate=100.0, slack_mm=slack)
+    assert _seg(lab, 2) in review_queue(lab)  # from a thumb marker: queued

@@ -19,11 +19,13 @@ from mocap_autolabel.core.stages.refine import DOUBTFUL_SHARE
 from mocap_autolabel.core.synth.generate import GHOST, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take, read_take
 from mocap_autolabel.core.temporal.confidence import (
+    SHORT_LABEL,
     fit_calibration,
     load_continuity,
     load_null_prior,
     load_partner,
     load_switch_cost,
+    split_doubtful_edges,
 )
 from mocap_autolabel.core.temporal.partners import (
     OWN_TOLERANCE,
@@ -502,12 +504,12 @@ def test_segments_tied_at_the_sure_threshold_are_all_counted():
 def test_a_short_marker_label_is_never_sure_but_a_short_null_can_be():
     rng = np.random.default_rng(2)
     n = 6000
-    length = np.where(np.arange(n) % 2 == 0, 3.0, 50.0)  # short and long segments
+    length = np.where(np.arange(n) % 2 == 0, SHORT_LABEL - 1.0, 50.0)  # short and long segments
     good = np.arange(n) < 4000  # strong evidence and right; the rest weak and mostly wrong
     p = np.where(good, 0.99, 0.5)
     evidence = np.column_stack([p, np.where(good, 1.0, 0.5), np.where(good, 8.0, 0.5), length])
     cal = fit_calibration(evidence, good | (rng.random(n) < 0.3))
-    short = length < 5
+    short = length < SHORT_LABEL
     labeled = rng.random(n) < 0.5
     assert (cal(evidence)[good] >= 0.95).all()  # without labels, every strong segment earned it
     conf = cal(evidence, labeled=labeled)[good]
@@ -862,3 +864,34 @@ def test_split_segments_matches_a_plain_split():
                 for s in rng.integers(0, 7, int(rng.integers(1, 4)))}
         got = split_segments(segments, cuts)
         assert list(zip(got.slot.tolist(), got.start.tolist(), got.stop.tolist())) == plain(segments, cuts)
+
+
+def _samples_of(labels: np.ndarray, valid: np.ndarray, own: np.ndarray) -> Samples:
+    frame, slot = np.nonzero(valid)
+    m = int(labels.max()) + 1
+    logp = np.full((len(frame), m + 1), -9.0, dtype=np.float32)
+    return Samples(frame=frame, slot=slot, logp=logp, label=own[frame, slot],
+                   confidence=np.ones(len(frame), dtype=np.float32))
+
+
+def test_doubtful_edges_are_cut_off_for_review_and_the_labels_stay():
+    """A trajectory whose last frame the per-frame labeler gives another marker, and a swap the vote
+    placed between scored frames: those frames become short segments of their own, with the same
+    labels (never sure: too short), and the vote's segment lengths are kept for the next vote."""
+    frames = 40
+    labels = np.full((frames, 3), NULL, dtype=np.int16)
+    labels[:, 0] = 0
+    labels[:20, 1], labels[20:, 1] = 1, 2  # one trajectory: the vote changed its label at frame 20
+    labels[:, 2] = NULL
+    valid = np.ones((frames, 3), dtype=bool)
+    split = np.zeros((frames, 3), dtype=bool)
+    lab = segments_from_runs(["a", "b", "c"], labels, valid, {}, split=split)
+    own = labels.astype(np.int32).copy()
+    own[38:, 0] = 2  # the labeler calls the last two frames of slot 0 "c"
+    cut = split_doubtful_edges(lab, _samples_of(labels, valid, own), stride=4)
+    np.testing.assert_array_equal(cut.per_sample(), lab.per_sample())  # no label changes
+    pieces = {(int(s), int(a), int(b)) for s, a, b in zip(cut.slot, cut.start, cut.stop)}
+    assert {(0, 0, 38), (0, 38, 40)} <= pieces  # the disputed end
+    assert {(1, 0, 17), (1, 17, 20), (1, 20, 23), (1, 23, 40)} <= pieces  # 3 unscored frames each side
+    assert cut.held is not None and cut.held[(cut.slot == 0) & (cut.start == 38)][0] == 40
+    assert split_doubtful_edges(lab, _samples_of(labels, valid, labels.astype(np.int32)), stride=1) is lab

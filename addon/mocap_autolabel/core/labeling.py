@@ -58,6 +58,10 @@ class Labeling:
             such marker was seen near in time (and for labeled segments); the review queue shows a
             short unlabeled piece close to a missing marker (``core/review.py:
             missing_marker_distance``). None: not known (a labeling stored before it was recorded).
+        held: int64 ``(n,)`` or None: frames of the vote's segment each segment was cut from, where
+            frames at its edges were cut off for review (``core/temporal/confidence.py:
+            split_doubtful_edges``); the next vote of the pass reads how long a label was held from it.
+            None: every segment is as the vote made it (:attr:`length`).
     """
 
     names: list[str]
@@ -72,6 +76,7 @@ class Labeling:
     info: dict
     evidence: np.ndarray | None = None
     missing_mm: np.ndarray | None = None
+    held: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.slot.shape[0])

@@ -18,7 +18,7 @@ from .errors import MocapInputError
 from .labelers import Labeler, labeler_method
 from .labeling import Labeling
 from .layout import Layout
-from .review import missing_marker_distance
+from .review import marker_slack, missing_marker_distance
 from .settings import Corrections, LabelSettings
 from .stages.decide import TEMPORAL_MODES, decide_stage, temporal_mode
 from .stages.hands import find_hands_stage, name_sides_stage
@@ -133,7 +133,8 @@ def _label_passes(take: Take, layout: Layout, attempt: Attempt, fit: np.ndarray 
     for key, value in run.attempt.notes:
         labeling.info[key] = value
     if labeling.missing_mm is None:  # the review queue's fact, once per labeling (a pass votes several times)
-        labeling.missing_mm = missing_marker_distance(labeling, take.positions, len(layout), take.rate)
+        labeling.missing_mm = missing_marker_distance(labeling, take.positions, len(layout), take.rate,
+                                                      slack_mm=marker_slack(layout))
     if restarted:  # the passes replaced (hands that traded places, props kept out), in seconds
         labeling.info["seconds"]["restarted"] = round(restarted, 4)
     run.say("labeled", 1.0)

@@ -21,6 +21,7 @@ from ..temporal.confidence import (
     load_partner,
     load_switch_cost,
     segment_evidence,
+    split_doubtful_edges,
 )
 from ..temporal.continuity import continuity_logp
 from ..temporal.partners import partner_logp, take_distances
@@ -122,7 +123,8 @@ class Vote(TemporalMode):
             facts = {"work_limited": 0}
             ids = first.segment_ids()[samples.frame, samples.slot]
             per = np.where(ids >= 0, first.label[np.maximum(ids, 0)], NULL).astype(np.int64)
-            held = np.where(ids >= 0, first.length[np.maximum(ids, 0)], 0)
+            held_for = first.length if first.held is None else first.held  # as the vote held the label
+            held = np.where(ids >= 0, held_for[np.maximum(ids, 0)], 0)
         else:
             decided, label, seg, facts = self._vote(run, samples)
             per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
@@ -213,6 +215,7 @@ def calibrate_confidence(run: LabelRun, labeling: Labeling, samples: Samples) ->
     """Each segment's evidence and its confidence: the mean probability, mapped through the shipped
     calibration for this method, mode and layout where one exists (locked segments are certain)."""
     s = run.settings
+    labeling = split_doubtful_edges(labeling, samples, run.stride)
     labeling.evidence = segment_evidence(labeling, samples)
     labeling.confidence = labeling.evidence[:, 0].copy()  # the mean probability, until calibrated
     calibration = load_calibration(s.method, s.temporal, run.layout.name) if s.calibrate_confidence else None

@@ -38,6 +38,83 @@ SURE, SURE_ACCURACY = 0.95, 0.999
 SHORT_LABEL = 11
 
 
+#: The most frames at a labeled segment's start or end cut off into a segment of their own where the
+#: per-frame labeling gives them another label (:func:`split_doubtful_edges`).
+DISPUTED_END = 3
+
+
+def _split_at(labeling, head: np.ndarray, tail: np.ndarray):
+    """``labeling`` with the first ``head`` and last ``tail`` frames ``(S,)`` of each segment cut off into
+    segments of their own (same label, lock and confidence; no evidence; ``held``: the whole segment's
+    frames)."""
+    from ..labeling import Labeling
+
+    n = len(labeling)
+    pieces = 1 + (head > 0) + (tail > 0)
+    idx = np.repeat(np.arange(n), pieces)
+    part = np.arange(len(idx)) - np.repeat(np.cumsum(pieces) - pieces, pieces)  # 0, 1, 2 within a segment
+    kind = np.where(np.repeat(head > 0, pieces), part, part + 1)  # 0 head, 1 middle, 2 tail
+    a, b, h, t = labeling.start[idx], labeling.stop[idx], head[idx], tail[idx]
+    start = np.where(kind == 0, a, np.where(kind == 1, a + h, b - t))
+    stop = np.where(kind == 0, a + h, np.where(kind == 1, b - t, b))
+    missing = None if labeling.missing_mm is None else labeling.missing_mm[idx]
+    held = labeling.length if labeling.held is None else labeling.held
+    return Labeling(names=labeling.names, n_frames=labeling.n_frames, n_points=labeling.n_points,
+                    slot=labeling.slot[idx], start=start, stop=stop, label=labeling.label[idx],
+                    confidence=labeling.confidence[idx], locked=labeling.locked[idx], info=labeling.info,
+                    evidence=None, missing_mm=missing, held=held[idx])
+
+
+def split_doubtful_edges(labeling, samples, stride: int, max_frames: int = DISPUTED_END):
+    """``labeling`` with the frames at the edges of its labeled segments that the rest of the segment
+    cannot vouch for cut off into short segments of their own (same labels; each then gets its own
+    evidence, and a short label is never sure: :data:`SHORT_LABEL`):
+
+    - up to ``max_frames`` at a segment's start or end whose per-frame labels differ from the
+      segment's: a trajectory that starts on another marker, or takes one over for its last frames;
+    - where the vote changed a trajectory's label from one marker's to another's (a swap), the
+      ``stride - 1`` frames on each side of the cut: the labeler scored every ``stride``-th frame,
+      so the swap may lie anywhere among them.
+
+    The labels do not change. Returns ``labeling`` itself where nothing is cut.
+
+    Args:
+        samples: the scored samples (:class:`.voting.Samples`: ``frame``, ``slot``, ``label``).
+        stride: frames between scored ones (:func:`.stride.stride_for`).
+    """
+    n = len(labeling)
+    if not n or not len(samples.frame):
+        return labeling
+    own = np.full((labeling.n_frames, labeling.n_points), -3, dtype=np.int32)  # -3: not scored
+    own[samples.frame, samples.slot] = samples.label
+    length = labeling.stop - labeling.start
+    label = labeling.label.astype(np.int32)
+    candidate = (label >= 0) & ~labeling.locked & (length > 1)
+    head = np.zeros(n, dtype=np.int64)
+    tail = np.zeros(n, dtype=np.int64)
+    for k in range(max_frames):
+        inside = candidate & (k < length - 1)
+        at_head = own[np.minimum(labeling.start + k, labeling.n_frames - 1), labeling.slot]
+        at_tail = own[np.maximum(labeling.stop - 1 - k, 0), labeling.slot]
+        head += inside & (head == k) & (at_head != -3) & (at_head != label)
+        tail += inside & (tail == k) & (at_tail != -3) & (at_tail != label)
+    if stride > 1:
+        # Swap cuts: a labeled segment followed on the same trajectory by another label, no frame between.
+        order = np.lexsort((labeling.start, labeling.slot))
+        s, a, b, lab = labeling.slot[order], labeling.start[order], labeling.stop[order], label[order]
+        cut = (s[1:] == s[:-1]) & (a[1:] == b[:-1]) & (lab[1:] != lab[:-1]) & (lab[1:] >= 0) & (lab[:-1] >= 0)
+        before, after = order[:-1][cut], order[1:][cut]
+        tail[before] = np.maximum(tail[before], stride - 1) * candidate[before]
+        head[after] = np.maximum(head[after], stride - 1) * candidate[after]
+    # A cut must leave frames in the middle: a segment doubtful from end to end is judged whole.
+    whole = head + tail >= length
+    head[whole] = 0
+    tail[whole] = 0
+    if not (head.any() or tail.any()):
+        return labeling
+    return _split_at(labeling, head, tail)
+
+
 EVIDENCE = ("mean probability", "agreement", "margin", "length")
 
 
