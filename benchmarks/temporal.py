@@ -28,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from datasets import HAN2018, glove13_take, han2018_sequences  # noqa: E402
+from mocap_autolabel.core.cache import RunCache  # noqa: E402
 from mocap_autolabel.core.labelers.gmm import GmmLabeler  # noqa: E402
 from mocap_autolabel.core.layout import load_layout  # noqa: E402
 from mocap_autolabel.core.metrics import clustered_se, score_labeling, segments_right  # noqa: E402
@@ -95,6 +96,7 @@ def stats(cases: list[Case], m: int) -> dict:
 def run(cases: list[Case], layout, method: str, temporal: str, score: str) -> tuple[dict, float, list]:
     per_take, seconds, segments = [], 0.0, []
     fitted: dict[int, GmmLabeler] = {}  # one fit per subject, as in the paper
+    cache = RunCache()  # one model load for all the takes, as a batch run's worker keeps it
     for c in cases:
         t = time.perf_counter()
         gmm = None
@@ -102,7 +104,8 @@ def run(cases: list[Case], layout, method: str, temporal: str, score: str) -> tu
             gmm = fitted.get(id(c.fit)) or GmmLabeler(layout).fit(c.fit)
             fitted[id(c.fit)] = gmm
         settings = LabelSettings(method=method, temporal=temporal, vote_score=score or "likelihood")
-        labeling = label_take(c.take, layout, settings, labeler=gmm, start=c.start if method == "nearest" else None)
+        labeling = label_take(c.take, layout, settings, labeler=gmm, start=c.start if method == "nearest" else None,
+                              cache=cache)
         seconds += time.perf_counter() - t
         s = score_labeling(labeling.per_sample(), c.truth, c.take.valid, len(layout)).as_dict()
         per_take.append([s[key] for key in COUNTS])
