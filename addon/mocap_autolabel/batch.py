@@ -60,6 +60,8 @@ class BatchSettings:
         confident: confidence at or above which a segment counts as confident in the reports.
         solve_hand: also fit the hand (calibrated on each take, or with ``calibration``).
         calibration: a performer calibration .json to reuse for every take.
+        fit: a labeled take of the performer (C3D, TRC, TSV): ``gmm`` fits on it, ``nearest`` starts from
+            its first frame (as ``label --fit``); the other methods do not use it.
         blend, fbx, bvh: also write these per take (need Blender or the bpy module).
         jobs: takes processed side by side (processes).
         scheduler: run each take as a task on a Dask cluster instead: ``tcp://HOST:8786`` (a farm's
@@ -94,6 +96,7 @@ class BatchSettings:
     confident: float = 0.95
     solve_hand: bool = False
     calibration: str | None = None
+    fit: str | None = None
     blend: bool = False
     fbx: bool = False
     bvh: bool = False
@@ -130,7 +133,7 @@ class BatchSettings:
             raise ValueError(f"{path}: unknown setting(s) {', '.join(sorted(unknown))}; known are "
                              f"{', '.join(sorted(known))}")
         base = os.path.dirname(os.path.abspath(path))
-        for key in ("model", "calibration"):
+        for key in ("model", "calibration", "fit"):
             if data.get(key):
                 data[key] = ",".join(os.path.join(base, p.strip()) for p in str(data[key]).split(","))
         if "hands" in data:
@@ -280,7 +283,7 @@ def settings_digest(settings: BatchSettings) -> str:
     from .core.version import __version__
 
     shaping = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings) if f.name not in RUN_ONLY}
-    files = [p.strip() for key in ("model", "calibration") for p in (getattr(settings, key) or "").split(",")]
+    files = [p.strip() for key in ("model", "calibration", "fit") for p in (getattr(settings, key) or "").split(",")]
     if settings.layout and settings.layout.endswith(".toml"):
         files.append(settings.layout)
     if settings.retarget:  # the character and the bone map shape the retargeted outputs: a changed one redoes them
@@ -508,7 +511,7 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
     from .core.formats.c3d import write_c3d
     from .core.labeling import unlabeled_point_names
     from .core.layout import load_layout
-    from .core.process import Outputs, choose_layout, process_take
+    from .core.process import Outputs, choose_layout, performer_inputs, process_take
     from .core.take import read_take
 
     t = time.perf_counter()
@@ -528,8 +531,11 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
                       fill=settings.fill_method if settings.fill else None, max_gap=settings.max_gap,
                       calibrations={**calibrations, "": one_cal} if one_cal is not None else calibrations or None,
                       confident=settings.confident)
+    performer = run_cache().remember("performer", (settings.fit, layout.name, settings.method),
+                                     lambda: performer_inputs(read_take(settings.fit), layout, settings.method)) \
+        if settings.fit else {}
     result = process_take(take, layout, settings.label_settings(validate_hand=one_cal), outputs,
-                          cache=run_cache())
+                          cache=run_cache(), **performer)
     labeling, labeled, checks, solved = result.labeling, result.labeled, result.checks, result.solves
     timings.update(result.seconds)
     facts = labeling.info["hands"]

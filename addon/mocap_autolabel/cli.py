@@ -185,6 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--confident", type=float, help="confidence counted as confident in reports (default 0.95)")
     bat.add_argument("--solve-hand", action="store_true", default=None, help="also fit the hand; RMS in the report")
     bat.add_argument("--calibration", metavar="CALIB.json", help="performer calibration for every take")
+    bat.add_argument("--fit", metavar="LABELED",
+                     help="a labeled take of the performer for every take: gmm fits on it, nearest starts from its "
+                          "first frame (as label --fit)")
     bat.add_argument("--blend", action="store_true", default=None,
                      help="also write a .blend per take (solves the hand)")
     bat.add_argument("--fbx", action="store_true", default=None, help="also write an FBX per take (solves the hand)")

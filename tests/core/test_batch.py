@@ -369,3 +369,39 @@ def test_the_bar_and_json_lines_say_the_eta(tmp_path):
             assert etas == ["--:--", "--:--", "01:25", "01:25", "00:00", "00:00"]
             assert lines[3].endswith("working on big (about 01:25)")
             assert lines[4].startswith("[########################] 3/3") and "FAILED big in 00:08: bad file" in lines[4]
+
+
+def test_a_performers_labeled_take_fits_gmm_for_every_take_as_label_fit_does(tmp_path, capsys):
+    from mocap_autolabel.core.labeling import labeled_take, segments_from_runs
+    from mocap_autolabel.core.take import Take
+
+    layout = load_layout("tips5_hand3")
+
+    def labeled(seed: int, frames: slice):
+        """One synthetic performer's take cut to ``frames``, labeled with its truth."""
+        s = synthesize(layout, 700, seed=seed)
+        take = Take(positions=s.take.positions[frames], names=s.take.names, rate=s.take.rate)
+        truth = segments_from_runs(layout.names, s.labels[frames], take.valid, {})
+        return take, labeled_take(take, truth)
+
+    fit = tmp_path / "performer.c3d"
+    write_c3d(labeled(5, slice(0, 400))[1], fit)
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    write_c3d(labeled(5, slice(400, 700))[0], takes / "a.c3d")  # the same performer, raw
+    out, alone, without = tmp_path / "out", tmp_path / "alone.c3d", tmp_path / "rom.c3d"
+    flags = ["--config", os.devnull, "--quiet", "--layout", "tips5_hand3", "--method", "gmm"]
+    assert main(["batch", str(takes), "-o", str(out), *flags, "--fit", str(fit)]) == 0
+    label = ["label", str(takes / "a.c3d"), "--layout", "tips5_hand3", "--method", "gmm", "--quiet", "-o"]
+    assert main([*label, str(alone), "--fit", str(fit)]) == 0
+    assert (out / "a.labeled.c3d").read_bytes() == alone.read_bytes()  # the same fit, the same labels
+    main([*label, str(without)])
+    assert not without.exists() or without.read_bytes() != alone.read_bytes()  # the range of motion labels otherwise
+    capsys.readouterr()
+    assert main(["batch", str(takes), "-o", str(out), *flags, "--fit", str(fit)]) == 0
+    assert "1 skipped" in capsys.readouterr().out  # the same performer's take: nothing to redo
+    write_c3d(labeled(7, slice(0, 400))[1], fit)  # another performer's: every take is labeled again
+    main(["batch", str(takes), "-o", str(out), *flags, "--fit", str(fit)])
+    assert "0 skipped" in capsys.readouterr().out
+    assert main(["batch", str(takes), "-o", str(out), *flags, "--fit", str(tmp_path / "none.c3d")]) == 2
+    assert "--fit" in capsys.readouterr().err

@@ -18,11 +18,15 @@ def _batch(args) -> int:
         print(f"mocap_autolabel batch: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     for key in ("layout", "model", "method", "temporal", "validate", "confident", "solve_hand", "calibration",
-                "blend", "fbx", "bvh", "jobs", "scheduler", "html", "force", "hands", "hand_names", "fill",
+                "fit", "blend", "fbx", "bvh", "jobs", "scheduler", "html", "force", "hands", "hand_names", "fill",
                 "fill_method", "max_gap", "retarget", "bone_map", "retarget_wrist", "pinch", "bone_names"):
         value = getattr(args, key)
         if value is not None:
             setattr(settings, key, value)
+    if settings.fit and not os.path.isfile(settings.fit):
+        print(f"mocap_autolabel batch: error: --fit {settings.fit}: no such file (a labeled take of the performer)",
+              file=sys.stderr)
+        return EXIT_USAGE
     if not 1 <= settings.jobs <= 64:
         print("mocap_autolabel batch: error: --jobs must be 1 to 64", file=sys.stderr)
         return EXIT_USAGE

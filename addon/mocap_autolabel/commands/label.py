@@ -27,9 +27,9 @@ def _label(args) -> int:
 
     from ..core.atomic import atomic_output
     from ..core.labelers import labeler_method
-    from ..core.labeling import layout_markers, unlabeled_point_names
+    from ..core.labeling import unlabeled_point_names
     from ..core.layout import load_layout
-    from ..core.process import Outputs, process_take, work_limit_warning
+    from ..core.process import Outputs, performer_inputs, process_take, work_limit_warning
     from ..core.quiet import silenced_stdout
     from ..core.synth.generate import load_truth, truth_path
     from ..core.take import read_take
@@ -70,14 +70,10 @@ def _label(args) -> int:
         layout = load_layout(args.layout)
         bar(f"reading {args.file}")
         take = read_take(args.file)
-        labeled = layout_markers(read_take(args.fit), layout) if args.fit else None
-        method = labeler_method(args.method)
+        performer = performer_inputs(read_take(args.fit) if args.fit else None, layout, args.method)
         outputs = Outputs(solve=args.solve_hand, fill=args.fill_method if args.fill else None,
                           max_gap=args.max_gap)
-        result = process_take(take, layout, _label_settings(args, layout), outputs,
-                              fit=labeled if labeled is not None and method.fits_performer else None,
-                              start=labeled[0] if labeled is not None and method.starts_from_frame else None,
-                              progress=bar)
+        result = process_take(take, layout, _label_settings(args, layout), outputs, progress=bar, **performer)
         labeling, doubt = result.labeling, result.doubt
         missed = [f"{side} hand: {check}" for side, check in result.checks if not check.found]
         if args.output:

@@ -23,7 +23,7 @@ from .hand.calibrate import Calibration
 from .hands import HandNaming
 from .labelers import Labeler, labeler_method
 from .labelers.onnx_labeler import shipped_model
-from .labeling import Labeling, labeled_take
+from .labeling import Labeling, labeled_take, layout_markers
 from .layout import DEFAULT_LAYOUT, Layout, builtin_layouts, layout_for_names, load_layout
 from .pipeline import label_take
 from .settings import Corrections, LabelSettings
@@ -35,8 +35,8 @@ from .take import Take
 
 #: What the front ends (CLI, batch, Blender) use of the core's labeling and solving.
 __all__ = ["TEMPORAL_MODES", "HandSolve", "LayoutDoubt", "Outputs", "TakeResult", "as_rig", "as_solves",
-           "choose_layout", "layout_doubt", "layout_from_names", "process_take", "solve_hands", "solve_take",
-           "work_limit_warning"]
+           "choose_layout", "layout_doubt", "layout_from_names", "performer_inputs", "process_take", "solve_hands",
+           "solve_take", "work_limit_warning"]
 
 #: The share of a labeling's work before its layout check (the check labels a short excerpt per layout).
 LABEL_SHARE = 0.95
@@ -262,6 +262,23 @@ def _two_hand_reading(take: Take, layout: Layout, settings: LabelSettings, outpu
         f"two hands found; {one_hint} labels one of them, the {side} hand here (a hand in "
         f"{100 * check.share:.0f} % of frames); {two_hint} labels both")]))
     return one, [("", check)]
+
+
+def performer_inputs(labeled: Take | None, layout: Layout, method: str) -> dict:
+    """The keywords of :func:`process_take` that a labeled take of the performer gives ``method``: ``fit``
+    ``(F, M, 3)`` for a labeler fitted per performer (``gmm``), ``start`` ``(M, 3)``, its first frame, for
+    one that starts from a labeled frame (``nearest``); none for the others (``set``).
+
+    Raises:
+        MocapInputError: ``labeled`` lacks some of the layout's marker names.
+    """
+    if labeled is None:
+        return {}
+    chosen = labeler_method(method)
+    if not (chosen.fits_performer or chosen.starts_from_frame):
+        return {}
+    positions = layout_markers(labeled, layout)
+    return {"fit": positions} if chosen.fits_performer else {"start": positions[0]}
 
 
 def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: Outputs = Outputs(), *,
