@@ -532,8 +532,7 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
                       calibrations={**calibrations, "": one_cal} if one_cal is not None else calibrations or None,
                       confident=settings.confident)
     performer = run_cache().remember("performer", (settings.fit, layout.name, settings.method),
-                                     lambda: performer_inputs(read_take(settings.fit), layout, settings.method)) \
-        if settings.fit else {}
+                                     lambda: performer_inputs(settings.fit, layout, settings.method))
     result = process_take(take, layout, settings.label_settings(validate_hand=one_cal), outputs,
                           cache=run_cache(), **performer)
     labeling, labeled, checks, solved = result.labeling, result.labeled, result.checks, result.solves

@@ -70,7 +70,7 @@ def _label(args) -> int:
         layout = load_layout(args.layout)
         bar(f"reading {args.file}")
         take = read_take(args.file)
-        performer = performer_inputs(read_take(args.fit) if args.fit else None, layout, args.method)
+        performer = performer_inputs(args.fit, layout, args.method)
         outputs = Outputs(solve=args.solve_hand, fill=args.fill_method if args.fill else None,
                           max_gap=args.max_gap)
         result = process_take(take, layout, _label_settings(args, layout), outputs, progress=bar, **performer)

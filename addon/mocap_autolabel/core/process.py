@@ -264,20 +264,21 @@ def _two_hand_reading(take: Take, layout: Layout, settings: LabelSettings, outpu
     return one, [("", check)]
 
 
-def performer_inputs(labeled: Take | None, layout: Layout, method: str) -> dict:
-    """The keywords of :func:`process_take` that a labeled take of the performer gives ``method``: ``fit``
-    ``(F, M, 3)`` for a labeler fitted per performer (``gmm``), ``start`` ``(M, 3)``, its first frame, for
-    one that starts from a labeled frame (``nearest``); none for the others (``set``).
+def performer_inputs(labeled: str | None, layout: Layout, method: str) -> dict:
+    """The keywords of :func:`process_take` that ``labeled``, the path of a labeled take of the performer, gives
+    ``method``: ``fit`` ``(F, M, 3)`` for a labeler fitted per performer (``gmm``), ``start`` ``(M, 3)``, its
+    first frame, for one that starts from a labeled frame (``nearest``); none for the others (``set``), whose
+    take is then not read.
 
     Raises:
-        MocapInputError: ``labeled`` lacks some of the layout's marker names.
+        MocapInputError: the take cannot be read, or lacks some of the layout's marker names.
     """
-    if labeled is None:
-        return {}
     chosen = labeler_method(method)
-    if not (chosen.fits_performer or chosen.starts_from_frame):
+    if labeled is None or not (chosen.fits_performer or chosen.starts_from_frame):
         return {}
-    positions = layout_markers(labeled, layout)
+    from .take import read_take
+
+    positions = layout_markers(read_take(labeled), layout)
     return {"fit": positions} if chosen.fits_performer else {"start": positions[0]}
 
 
