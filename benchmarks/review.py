@@ -105,7 +105,7 @@ def queue_sets(hands: int, frames: int, quick: bool, queue_takes: int | None) ->
     """The review queue on each set of takes (see :func:`queue_figures`), labeled by the core as the Label
     operator labels (set + vote, defaults)."""
     from mocap_autolabel.core.pipeline import label_take
-    from mocap_autolabel.core.synth.generate import load_truth, truth_path
+    from mocap_autolabel.core.synth.truth import load_truth, truth_path
     from mocap_autolabel.core.take import read_take
 
     layout = load_layout("han19")

@@ -581,7 +581,7 @@ def _work(path: str, name: str, out_dir: str, settings: BatchSettings, timings: 
             out["hand"] = reports[0]
         if settings.needs_blender():
             t = time.perf_counter()
-            from .core.process import as_rig
+            from .core.solve import as_rig
 
             rigs = as_rig(solved)
             out["outputs"].update(_blender_outputs(labeled, rigs, os.path.join(out_dir, name), settings, out))

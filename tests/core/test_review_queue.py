@@ -225,7 +225,7 @@ def test_the_distance_survives_storage_edits_and_old_states_load_without_it():
 def demo():
     from mocap_autolabel.core.layout import load_layout
     from mocap_autolabel.core.pipeline import label_take
-    from mocap_autolabel.core.synth.generate import load_truth, truth_path
+    from mocap_autolabel.core.synth.truth import load_truth, truth_path
     from mocap_autolabel.core.take import read_take
 
     take = read_take(DEMO)

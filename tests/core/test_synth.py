@@ -18,11 +18,11 @@ from mocap_autolabel.core.synth.generate import (
     GHOST,
     SynthConfig,
     clean_config,
-    load_truth,
     save_synth,
     synthesize,
 )
 from mocap_autolabel.core.synth.motion import generate_motion
+from mocap_autolabel.core.synth.truth import load_truth
 from mocap_autolabel.core.tracklets import find_tracklets, mask_runs
 
 

@@ -31,7 +31,8 @@ from mocap_autolabel.core.metrics import score_labeling
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.settings import Corrections, LabelSettings
 from mocap_autolabel.core.solve import solve_hands, solve_take
-from mocap_autolabel.core.synth.generate import corrupt_take, load_truth, synthesize
+from mocap_autolabel.core.synth.generate import corrupt_take, synthesize
+from mocap_autolabel.core.synth.truth import load_truth
 from mocap_autolabel.core.synth.two_hands import TwoHandConfig, save_two_hands, two_hand_take
 from mocap_autolabel.core.take import Take, read_take
 

@@ -56,7 +56,7 @@ from mathutils import Matrix
 
 from ..core.atomic import atomic_output
 from ..core.errors import MocapInputError
-from ..core.process import as_solves
+from ..core.solve import as_solves
 from . import animio
 
 #: ``--bone-names``: our bone names, or those of a rig convention (:func:`..core.retarget.bone_maps.export_names`).

@@ -31,7 +31,7 @@ def _label(args) -> int:
     from ..core.layout import load_layout
     from ..core.process import Outputs, performer_inputs, process_take, work_limit_warning
     from ..core.quiet import silenced_stdout
-    from ..core.synth.generate import load_truth, truth_path
+    from ..core.synth.truth import load_truth, truth_path
     from ..core.take import read_take
 
     if args.output and not args.output.lower().endswith(".c3d"):
@@ -200,11 +200,12 @@ def _hand_options(args) -> dict:
 
 def _label_settings(args, layout):
     """The :class:`.core.settings.LabelSettings` of ``label``'s flags."""
-    from ..core.hand.calibrate import Calibration
     from ..core.settings import LabelSettings
 
     hand = None
     if args.calibration:
+        from ..core.hand.calibrate import Calibration
+
         hand = Calibration.load(args.calibration)
         hand.check(layout, args.calibration)
     return LabelSettings(method=args.method, temporal=args.temporal, model=args.model, vote_score=args.vote,

@@ -12,14 +12,13 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .cache import RunCache
 from .checks import HandCheck, LayoutDoubt, check_hand, hand_checks, work_limit_warning
 from .errors import MocapInputError
-from .fill import MAX_GAP, fill_gaps
-from .hand.calibrate import Calibration
 from .hands import HandNaming
 from .labelers import Labeler, labeler_method
 from .labelers.onnx_labeler import shipped_model
@@ -27,16 +26,18 @@ from .labeling import Labeling, labeled_take, layout_markers
 from .layout import DEFAULT_LAYOUT, Layout, builtin_layouts, layout_for_names, load_layout
 from .pipeline import label_take
 from .settings import Corrections, LabelSettings
-from .solve import HandSolve, as_rig, as_solves, solve_hands, solve_take
 from .stages.decide import TEMPORAL_MODES
 from .stages.refine import CLEARLY_BETTER, DOUBTFUL_SHARE
 from .stages.run import Progress, no_progress
 from .take import Take
 
+if TYPE_CHECKING:  # the solve and the fill are imported where they run: labeling alone needs neither
+    from .hand.calibrate import Calibration
+    from .solve import HandSolve
+
 #: What the front ends (CLI, batch, Blender) use of the core's labeling and solving.
-__all__ = ["TEMPORAL_MODES", "HandSolve", "LayoutDoubt", "Outputs", "TakeResult", "as_rig", "as_solves",
-           "choose_layout", "layout_doubt", "layout_from_names", "performer_inputs", "process_take", "solve_hands",
-           "solve_take", "work_limit_warning"]
+__all__ = ["TEMPORAL_MODES", "LayoutDoubt", "Outputs", "TakeResult", "choose_layout", "layout_doubt",
+           "layout_from_names", "performer_inputs", "process_take", "work_limit_warning"]
 
 #: The share of a labeling's work before its layout check (the check labels a short excerpt per layout).
 LABEL_SHARE = 0.95
@@ -76,7 +77,7 @@ class Outputs:
     pick_layout: bool = False
     solve: bool = False
     fill: str | None = None
-    max_gap: float = MAX_GAP
+    max_gap: float | None = None  # None: the fill's own (:data:`.fill.MAX_GAP`)
     calibrations: dict[str, Calibration] | None = None
     calibrate: bool = True
     solve_options: dict = field(default_factory=dict)
@@ -122,6 +123,8 @@ class TakeResult:
 
     def rig(self) -> HandSolve | list[tuple[str, HandSolve]] | None:
         """The solve as the scene writers take it (:func:`.solve.as_rig`)."""
+        from .solve import as_rig
+
         return as_rig(self.solves)
 
 
@@ -331,6 +334,8 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
         labeled = take
     naming = _naming(labeling, settings)
     if outputs.solve and solves is None:
+        from .solve import solve_hands
+
         t = time.perf_counter()
         solves = solve_hands(labeled, layout, naming, outputs.calibrations, progress=progress, cache=cache,
                              **outputs.solve_options)
@@ -340,7 +345,10 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
         t = time.perf_counter()
         progress("filling gaps", 0.0)
         # A fill that uses the hand solves it first where it is not solved yet (:func:`.fill.fill_gaps`).
-        filled = fill_gaps(labeled, layout, outputs.fill, outputs.max_gap, solves=solves, naming=naming,
+        from .fill import MAX_GAP, fill_gaps
+
+        max_gap = MAX_GAP if outputs.max_gap is None else outputs.max_gap
+        filled = fill_gaps(labeled, layout, outputs.fill, max_gap, solves=solves, naming=naming,
                            calibrate=outputs.calibrate, calibrations=outputs.calibrations, **outputs.solve_options)
         if solves is None and filled.solves:
             solves = filled.solves

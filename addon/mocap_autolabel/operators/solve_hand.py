@@ -168,7 +168,7 @@ class MOCAPAL_OT_solve_hand(JobModal, bpy.types.Operator):
         from ..blender.armature import build_solved_hand, solved_hand_collection
         from ..blender.scene import free_name
         from ..core.hands import sided_path
-        from ..core.process import as_solves
+        from ..core.solve import as_solves
 
         hands = as_solves(solved)
         try:

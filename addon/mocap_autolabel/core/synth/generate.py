@@ -36,6 +36,7 @@ from .corrupt import (
 )
 from .motion import MotionConfig, generate_motion, min_jerk
 from .poses import CANONICAL_POSES
+from .truth import truth_path
 
 GHOST = -1  #: truth label of a ghost sample
 EMPTY = -2  #: truth label where a slot has no sample
@@ -287,12 +288,6 @@ def _pack(rng: np.random.Generator, tracks: np.ndarray, track_labels: np.ndarray
     return positions, labels
 
 
-def truth_path(take_path: str | os.PathLike) -> str:
-    """Where the ground truth of a synthetic take is written: ``take.c3d`` -> ``take.truth.npz``."""
-    stem, _ = os.path.splitext(os.fspath(take_path))
-    return stem + ".truth.npz"
-
-
 def save_synth(synth: SynthTake, path: str | os.PathLike) -> tuple[str, str]:
     """Write the take as C3D (``*N`` names, mm) and its truth beside it; both atomic and byte-stable.
 
@@ -334,14 +329,6 @@ def write_truth(take_path: str, arrays: dict[str, np.ndarray]) -> str:
             buf = io.BytesIO()
             np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
             z.writestr(entry, buf.getvalue())
-    return out
-
-
-def load_truth(path: str | os.PathLike) -> dict:
-    """Read a truth sidecar: ``labels``, ``markers``, ``poses`` arrays and the ``info`` dict."""
-    with np.load(os.fspath(path), allow_pickle=False) as z:
-        out = {k: z[k] for k in ("labels", "markers", "poses")}
-        out["info"] = json.loads(z["info"].item())
     return out
 
 
