@@ -29,7 +29,7 @@ from .settings import Corrections, LabelSettings
 from .stages.decide import TEMPORAL_MODES
 from .stages.refine import CLEARLY_BETTER, DOUBTFUL_SHARE
 from .stages.run import Progress, no_progress
-from .take import Take
+from .take import Take, read_take
 
 if TYPE_CHECKING:  # the solve and the fill are imported where they run: labeling alone needs neither
     from .hand.calibrate import Calibration
@@ -279,8 +279,6 @@ def performer_inputs(labeled: str | None, layout: Layout, method: str) -> dict:
     chosen = labeler_method(method)
     if labeled is None or not (chosen.fits_performer or chosen.starts_from_frame):
         return {}
-    from .take import read_take
-
     positions = layout_markers(read_take(labeled), layout)
     return {"fit": positions} if chosen.fits_performer else {"start": positions[0]}
 

@@ -124,8 +124,8 @@ def missing_marker_distance(labeling: Labeling, positions: np.ndarray, hand_size
 
     Args:
         positions: ``(F, P, 3)`` the take's samples (metres).
-        slack_mm: ``(hand_size,)`` how much less well each marker of a hand is predicted (mm; default 0:
-            :func:`marker_slack`).
+        slack_mm: ``(hand_size,)`` how much less well each marker of a hand is predicted (mm), a layout's
+            from :func:`marker_slack`; None: none.
     """
     n, n_labels = len(labeling), len(labeling.names)
     out = np.full(n, -1, dtype=np.int32)

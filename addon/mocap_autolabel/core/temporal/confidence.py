@@ -85,7 +85,7 @@ def split_doubtful_edges(labeling, samples, stride: int, max_frames: int = DISPU
     n = len(labeling)
     if not n or not len(samples.frame):
         return labeling
-    own = np.full((labeling.n_frames, labeling.n_points), -3, dtype=np.int32)  # -3: not scored
+    own = np.full((labeling.n_frames, labeling.n_points), -3, dtype=np.int32)  # -3: no sample
     own[samples.frame, samples.slot] = samples.label
     length = labeling.stop - labeling.start
     label = labeling.label.astype(np.int32)
@@ -99,11 +99,11 @@ def split_doubtful_edges(labeling, samples, stride: int, max_frames: int = DISPU
         head += inside & (head == k) & (at_head != -3) & (at_head != label)
         tail += inside & (tail == k) & (at_tail != -3) & (at_tail != label)
     if stride > 1:
-        # Swap cuts: a labeled segment followed on the same trajectory by another label, no frame between.
-        order = np.lexsort((labeling.start, labeling.slot))
-        s, a, b, lab = labeling.slot[order], labeling.start[order], labeling.stop[order], label[order]
-        cut = (s[1:] == s[:-1]) & (a[1:] == b[:-1]) & (lab[1:] != lab[:-1]) & (lab[1:] >= 0) & (lab[:-1] >= 0)
-        before, after = order[:-1][cut], order[1:][cut]
+        # Swap cuts: a labeled segment followed on the same trajectory by another label, no frame between
+        # (segments are ordered by slot, then start).
+        s, a, b = labeling.slot, labeling.start, labeling.stop
+        cut = (s[1:] == s[:-1]) & (a[1:] == b[:-1]) & (label[1:] != label[:-1]) & (label[1:] >= 0) & (label[:-1] >= 0)
+        before, after = np.flatnonzero(cut), np.flatnonzero(cut) + 1
         tail[before] = np.maximum(tail[before], stride - 1) * candidate[before]
         head[after] = np.maximum(head[after], stride - 1) * candidate[after]
     # A cut must leave frames in the middle: a segment doubtful from end to end is judged whole.
