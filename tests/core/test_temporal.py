@@ -98,6 +98,38 @@ def test_exclusive_assignment_is_optimal(seed):
                 assert labels[a] != labels[b]
 
 
+def test_the_relaxed_assignment_is_exclusive_keeps_the_locks_and_is_near_the_exact_one():
+    """The first vote of a pass settles clashes by the integer programme's linear relaxation, rounded
+    in the order of its values: the labels stay exclusive in time, the locks hold, the same problem
+    gives the same labels, and the labeling weighs more than the greedy one (on these dense random
+    problems, within 11 % of the exact one; its labels are evidence for the vote that decides)."""
+    from mocap_autolabel.core.temporal.voting import _greedy_assignment, _objective
+
+    rng = np.random.default_rng(7)
+    n, m = 80, 4
+    for trial in range(6):
+        start = rng.integers(0, 60, n)
+        segs = _segments(start, start + rng.integers(1, 20, n))
+        weights = rng.normal(size=(n, m + 1)) * 5
+        weights[:, :m] += 4.0
+        switch = np.where(rng.random(n) < 0.3, 3.0, 0.0)
+        locked = {1: 2, 7: NULL}
+        relaxed = exclusive_assignment(weights, segs, locked, candidates=m, switch=switch, exact_pairs=0)
+        again = exclusive_assignment(weights, segs, locked, candidates=m, switch=switch, exact_pairs=0)
+        exact = exclusive_assignment(weights, segs, locked, candidates=m, switch=switch)
+        assert np.array_equal(relaxed, again)
+        assert relaxed[1] == 2 and relaxed[7] == NULL
+        for a in range(n):
+            for b in range(a + 1, n):
+                if segs.start[a] < segs.stop[b] and segs.start[b] < segs.stop[a] and relaxed[a] >= 0:
+                    assert relaxed[a] != relaxed[b], (trial, a, b)
+        col = lambda labels: np.where(labels == NULL, m, labels)  # noqa: E731
+        var_seg, var_lab = np.nonzero(np.ones((n, m + 1), dtype=bool))
+        greedy = _objective(weights, _greedy_assignment(weights, segs, var_seg, var_lab, locked, switch), switch)
+        best, got = _objective(weights, col(exact), switch), _objective(weights, col(relaxed), switch)
+        assert best >= got > greedy, (trial, best, got, greedy)
+
+
 def test_exclusive_assignment_at_the_smallest_work_bound_still_labels():
     """Stopped by the smallest work bound (no search node), the vote still labels: the better of the
     solver's best and the greedy labeling, which keeps the locks and exclusivity and weighs at least

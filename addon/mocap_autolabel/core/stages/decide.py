@@ -25,7 +25,7 @@ from ..temporal.confidence import (
 )
 from ..temporal.continuity import continuity_logp
 from ..temporal.partners import partner_logp, take_distances
-from ..temporal.voting import Samples, Segments, vote
+from ..temporal.voting import FIRST_LOOK_PAIRS, Samples, Segments, vote
 from .look import look_again
 from .run import LabelRun
 from .scoring import score_samples
@@ -106,12 +106,13 @@ class Vote(TemporalMode):
     allows_validation = True
     uses_evidence = True
 
-    def _vote(self, run: LabelRun, scored: Samples) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
+    def _vote(self, run: LabelRun, scored: Samples, exact_pairs: int | None = None
+              ) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
         s = run.settings
         fitted = run.info
         return vote(scored, run.segments, run.locked_at, s.vote_score, s.power_p, s.power_q, s.split_swaps,
                     null_prior=tuple(fitted["null_prior"]), crossings=run.crossings,
-                    switch_cost=tuple(fitted["switch_cost"]))
+                    switch_cost=tuple(fitted["switch_cost"]), exact_pairs=exact_pairs)
 
     def decide(self, run: LabelRun, scores: np.ndarray, samples: Samples, first: Labeling | None = None,
                again: LookAgain | None = None) -> tuple[Labeling, Samples]:
@@ -126,7 +127,10 @@ class Vote(TemporalMode):
             held_for = first.length if first.held is None else first.held  # as the vote held the label
             held = np.where(ids >= 0, held_for[np.maximum(ids, 0)], 0)
         else:
-            decided, label, seg, facts = self._vote(run, samples)
+            # Where a vote with the evidence of partners or continuity follows, this one's labels are
+            # only that evidence: a large programme's relaxation suffices, and never takes minutes.
+            decided, label, seg, facts = self._vote(
+                run, samples, exact_pairs=FIRST_LOOK_PAIRS if with_rigid or with_continuity else None)
             per = np.where(seg >= 0, label[np.maximum(seg, 0)], NULL)
             held = None
         rescored = None

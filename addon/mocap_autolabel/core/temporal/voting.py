@@ -215,11 +215,17 @@ def segment_weights(samples: Samples, seg: np.ndarray, n_segments: int, score: s
 #: stops the solver, the better of its best labeling so far and the greedy one is used, and the
 #: vote refines no further.
 MILP_NODES = 1000
+#: Candidate (segment, label) pairs up to which a first look (a vote whose labels are evidence for
+#: the vote that decides) solves its integer programme exactly; larger ones take its rounded
+#: relaxation. Where two hands are mixed up, the exact programme's root alone can take minutes on a
+#: few thousand frames; hands apart stay well under this.
+FIRST_LOOK_PAIRS = 4000
 
 
 def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[int, int] | None = None,
                          candidates: int | None = None, node_limit: int = MILP_NODES,
-                         switch: np.ndarray | None = None, facts: dict | None = None) -> np.ndarray:
+                         switch: np.ndarray | None = None, facts: dict | None = None,
+                         exact_pairs: int | None = None) -> np.ndarray:
     """The best label per segment (:data:`NULL` allowed) such that no two segments that overlap
     in time share a label. ``locked`` fixes some segments' labels.
 
@@ -237,6 +243,10 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
             finds useful.
         node_limit: branch-and-bound nodes a solve may explore (:data:`MILP_NODES`).
         facts: if given, ``facts["work_limited"]`` counts the solves stopped by ``node_limit``.
+        exact_pairs: None: the integer programme decides. Otherwise, where the groups that clash hold
+            more candidate pairs than this, its linear relaxation does, rounded greedily in the
+            order of its values (no branch and bound, no cutting planes): for a first look, whose
+            labels are only evidence for the vote that decides.
 
     Returns:
         int64 ``(S,)`` labels.
@@ -278,8 +288,10 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     index[sub] = np.arange(len(sub))
     sub_locked = {int(index[s]): lab for s, lab in locked.items() if inside[s]}
     sub_segments = Segments(segments.slot[sub], segments.start[sub], segments.stop[sub])
-    out[sub], stopped = _milp_assignment(weights[sub], sub_segments, index[var_seg[keep_var]], var_lab[keep_var],
-                                         sub_locked, node_limit, switch[sub])
+    sub_var = index[var_seg[keep_var]]
+    out[sub], stopped = _milp_assignment(weights[sub], sub_segments, sub_var, var_lab[keep_var],
+                                         sub_locked, node_limit, switch[sub],
+                                         relaxed=exact_pairs is not None and len(sub_var) > exact_pairs)
     if facts is not None:
         facts["work_limited"] = facts.get("work_limited", 0) + int(stopped)
     return np.where(out == m, NULL, out)
@@ -308,11 +320,13 @@ def _best_chains(weights: np.ndarray, switch: np.ndarray) -> np.ndarray:
 
 
 def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarray, var_lab: np.ndarray,
-                     locked: dict[int, int], node_limit: int, switch: np.ndarray) -> tuple[np.ndarray, bool]:
+                     locked: dict[int, int], node_limit: int, switch: np.ndarray,
+                     relaxed: bool = False) -> tuple[np.ndarray, bool]:
     """The exclusive assignment as an integer programme over the candidate (segment, label) pairs
     (and one switch variable per paid link between pieces of a trajectory); returns labels with
     null as ``M``, and whether the work bound stopped the solver (then the better of its labeling
-    and :func:`_greedy_assignment`'s)."""
+    and :func:`_greedy_assignment`'s). ``relaxed``: the linear relaxation instead, its pairs taken
+    greedily in the order of their values."""
     n, m1 = weights.shape
     m = m1 - 1
     n_pairs = len(var_seg)
@@ -368,6 +382,12 @@ def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarra
         lower[np.flatnonzero((var_seg == s) & (var_lab == col))] = 1.0
     cost = np.concatenate([-weights[var_seg, var_lab], switch[links]])
     integrality = np.concatenate([np.ones(n_pairs), np.zeros(len(links))])  # switches follow the labels
+    if relaxed:
+        res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=np.zeros(n_vars),
+                   bounds=Bounds(lower, np.ones(n_vars)))
+        # Rounded to ignore the last digits' noise: ties then go by gain, segment and label.
+        priority = None if res.x is None else np.round(res.x[:n_pairs], 6)
+        return _greedy_assignment(weights, segments, var_seg, var_lab, locked, switch, priority), False
     res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=integrality,
                bounds=Bounds(lower, np.ones(n_vars)), options={"node_limit": int(node_limit)})
     if res.status in (2, 3):  # all null but the locks is always a labeling: never here
@@ -393,33 +413,34 @@ def _objective(weights: np.ndarray, labels: np.ndarray, switch: np.ndarray) -> f
 
 
 def _greedy_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarray, var_lab: np.ndarray,
-                       locked: dict[int, int], switch: np.ndarray) -> np.ndarray:
+                       locked: dict[int, int], switch: np.ndarray, priority: np.ndarray | None = None) -> np.ndarray:
     """An exclusive labeling (null as ``M``) without search: the locks, then the candidate
-    (segment, label) pairs by how much they beat null, best first (ties by segment and label),
+    (segment, label) pairs by ``priority`` ``(pairs,)`` where given, then by how much they beat
+    null, best first (ties by segment and label),
     each taken where its segment is still free and no overlapping segment holds the label. The
     floor a bounded solve never falls below; deterministic."""
     n, m1 = weights.shape
     m = m1 - 1
     out = np.full(n, -1, dtype=np.int64)
-    held: dict[int, list[tuple[int, int]]] = {}  # label -> frame ranges taken
-
-    def free(label: int, s: int) -> bool:
-        a, b = int(segments.start[s]), int(segments.stop[s])
-        return all(b <= lo or hi <= a for lo, hi in held.get(label, ()))
-
+    first = int(segments.start.min(initial=0))
+    # Frames each label is held in (from the first segment's start): a slice tells whether a
+    # segment's frames are free of it.
+    held = np.zeros((m, int(segments.stop.max(initial=first)) - first), dtype=bool)
+    start, stop = (segments.start - first).tolist(), (segments.stop - first).tolist()
     for s, label in sorted(locked.items()):
         out[s] = m if label == NULL else label
         if label != NULL:
-            held.setdefault(label, []).append((int(segments.start[s]), int(segments.stop[s])))
+            held[label, start[s]:stop[s]] = True
     real = var_lab < m
-    gain = weights[var_seg[real], var_lab[real]] - weights[var_seg[real], m]
-    order = np.lexsort((var_lab[real], var_seg[real], -gain))
-    for i in order.tolist():
-        s, label = int(var_seg[real][i]), int(var_lab[real][i])
-        if gain[i] <= 0 or out[s] >= 0 or not free(label, s):
+    seg_r, lab_r = var_seg[real], var_lab[real]
+    gain = weights[seg_r, lab_r] - weights[seg_r, m]
+    order = np.lexsort((lab_r, seg_r, -gain) + (() if priority is None else (-priority[real],)))
+    order = order[gain[order] > 0]
+    for s, label in zip(seg_r[order].tolist(), lab_r[order].tolist()):
+        if out[s] >= 0 or held[label, start[s]:stop[s]].any():
             continue
         out[s] = label
-        held.setdefault(label, []).append((int(segments.start[s]), int(segments.stop[s])))
+        held[label, start[s]:stop[s]] = True
     out[out < 0] = m
     return out
 
@@ -484,7 +505,8 @@ def tracklet_share(segments: Segments) -> np.ndarray:
 def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str = "likelihood", p: float = 2.0,
          q: float = -0.5, split_swaps: bool = True, refine: int = 3,
          null_prior: tuple[float, float] = (0.0, 0.0), crossings: dict[int, list[int]] | None = None,
-         switch_cost: tuple[float, float] = (0.0, 0.0)) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
+         switch_cost: tuple[float, float] = (0.0, 0.0), exact_pairs: int | None = None
+         ) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
     """Trajectory voting end to end: split swaps, weigh, assign exclusively, refine where it clashed.
 
     A segment that lost its best label to an overlapping segment is cut at the edges of that
@@ -511,6 +533,8 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
             pinched fingertip as the thumb's is no proof that the trajectory changed marker; a
             piece may still change label where its evidence outweighs the cost. The cuts of
             ``segments`` as given (a reviewer's splits and locks) are free.
+        exact_pairs: clashes of more candidate pairs than this are settled by the integer
+            programme's rounded relaxation (:func:`exclusive_assignment`): a first look.
 
     Returns:
         the final segments, their labels int64 ``(S,)``, the segment of each sample ``(n,)`` and
@@ -535,7 +559,8 @@ def vote(samples: Samples, segments: Segments, locked_at: np.ndarray, score: str
         first_locked = locked_at[segments.start, segments.slot]
         locked = {int(i): int(first_locked[i]) for i in np.flatnonzero(first_locked >= NULL)}
         switch = switch_costs(segments, free, crossing_at, switch_cost)
-        labels = exclusive_assignment(weights, segments, locked, switch=switch, facts=facts)
+        labels = exclusive_assignment(weights, segments, locked, switch=switch, facts=facts,
+                                      exact_pairs=exact_pairs)
         labels[(count == 0) & (first_locked < NULL)] = NULL  # never scored (beyond the cap): no evidence
         if facts["refined"] >= refine or facts["work_limited"]:  # refining a bounded solve is more of the same
             break
