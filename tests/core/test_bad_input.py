@@ -132,3 +132,13 @@ def test_failed_write_leaves_nothing(tmp_path):
     with pytest.raises(MocapInputError):
         write_c3d(take, target, units="parsec")
     assert os.listdir(tmp_path) == []
+
+
+def test_an_unknown_processor_type_is_named_not_the_parsers_internal_error(good_c3d, tmp_path):
+    data = bytearray(good_c3d.read_bytes())
+    data[(data[0] - 1) * 512 + 3] = 99  # the parameter section's processor type: 84, 85 or 86
+    bad = tmp_path / "processor.c3d"
+    bad.write_bytes(bytes(data))
+    message = _error(bad)
+    assert "unknown processor type 99" in message and "84 (Intel)" in message
+    assert "local variable" not in message and "float_unpack" not in message

@@ -228,7 +228,24 @@ def _parse_metadata(path: str, meta: bytes):
         rebuilt, fixes = rebuild_parameter_section(meta)
         return parse(rebuilt), fixes
     except Exception as exc:
-        raise MocapInputError(path, f"damaged parameter section that cannot be repaired ({exc})") from None
+        raise MocapInputError(path, "damaged parameter section that cannot be repaired: "
+                              + _parse_failure(meta, exc)) from None
+
+
+#: The parameter section's processor type byte: how its numbers are stored.
+PROCESSORS = {84: "Intel", 85: "DEC", 86: "MIPS"}
+
+
+def _parse_failure(meta: bytes, exc: Exception) -> str:
+    """What a reader of the file can act on, instead of the parser's internal error: an unknown
+    processor type, or where the parameters stop making sense."""
+    start = (meta[0] - 1) * 512 if meta and meta[0] >= 1 else -1
+    if 0 <= start and start + 3 < len(meta) and meta[start + 3] not in PROCESSORS:
+        known = ", ".join(f"{code} ({name})" for code, name in PROCESSORS.items())
+        return f"unknown processor type {meta[start + 3]} in its first block; {known} expected"
+    if isinstance(exc, (ValueError, EOFError)) and str(exc):
+        return str(exc)
+    return "a parameter's name, type or size is out of range"
 
 
 def _param(reader, key: str):

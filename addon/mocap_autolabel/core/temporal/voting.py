@@ -337,22 +337,24 @@ def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarra
     n_rows = n
     # A switch variable is at least z(s - 1, l) - z(s, l) for every label l of s - 1: it is 1
     # wherever the two pieces differ.
-    var_of = {(int(a), int(b)): i for i, (a, b) in enumerate(zip(var_seg, var_lab))}
-    # var_seg is sorted: segment s's variables are seg_vars[s]:seg_vars[s + 1].
+    # var_seg is sorted (labels sorted within a segment): segment s's variables are
+    # seg_vars[s]:seg_vars[s + 1], and (segment, label) keys are sorted too.
     seg_vars = np.searchsorted(var_seg, np.arange(n + 1))
-    link_rows = []
-    for j, s in enumerate(links.tolist()):
-        for v in range(seg_vars[s - 1], seg_vars[s]):
-            row = [(n_pairs + j, 1.0), (v, -1.0)]
-            w = var_of.get((s, int(var_lab[v])))
-            if w is not None:
-                row.append((w, 1.0))
-            link_rows.append(row)
-    for row in link_rows:
-        rows.append(np.full(len(row), n_rows))
-        cols.append(np.array([c for c, _ in row]))
-        vals.append(np.array([x for _, x in row]))
-        n_rows += 1
+    key = var_seg * m1 + var_lab
+    count = seg_vars[links] - seg_vars[links - 1]  # one row per variable of the piece before
+    j = np.repeat(np.arange(len(links)), count)
+    before = np.arange(int(count.sum())) + np.repeat(seg_vars[links - 1] - np.cumsum(count) + count, count)
+    want = np.repeat(links, count) * m1 + var_lab[before]
+    after = np.minimum(np.searchsorted(key, want), max(n_pairs - 1, 0))
+    has = key[after] == want
+    # Row entries in order: the switch (+1), z(s - 1, l) (-1), z(s, l) (+1) where s has label l.
+    entry = np.stack([n_pairs + j, before, after], axis=1).ravel()
+    sign = np.tile([1.0, -1.0, 1.0], len(before))
+    keep = np.stack([np.ones(len(before), dtype=bool), np.ones(len(before), dtype=bool), has], axis=1).ravel()
+    rows.append(np.repeat(n_rows + np.arange(len(before)), 3)[keep])
+    cols.append(entry[keep])
+    vals.append(sign[keep])
+    n_rows += len(before)
     n_fixed = n_rows
     # Cliques: per label, the candidate segments alive at each candidate's start frame.
     for label in range(m):
