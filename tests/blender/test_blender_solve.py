@@ -157,6 +157,17 @@ def test_solve_operator_on_an_imported_labeled_take(bpy_module, solved, empty_sc
     assert len(bpy.data.objects) == objects
 
 
+def test_solve_hand_on_an_imported_take_not_labeled_yet_says_label_it_first(bpy_module, empty_scene, tmp_path):
+    bpy = bpy_module
+    raw = synthesize(load_layout("han19"), 20, seed=1).take  # unlabeled: *N names
+    write_c3d(raw, tmp_path / "raw.c3d")
+    assert bpy.ops.mocap_autolabel.import_markers(filepath=str(tmp_path / "raw.c3d")) == {"FINISHED"}
+    objects = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match="is not labeled yet .*: label it first .*Label Markers"):
+        bpy.ops.mocap_autolabel.solve_hand(layout="han19")
+    assert len(bpy.data.objects) == objects
+
+
 def test_drive_a_users_own_armature_through_a_bone_map(bpy_module):
     """Another rig (other names, rolled bones, moved and turned object) turns bone for bone like ours."""
     bpy = bpy_module

@@ -142,3 +142,14 @@ def test_an_unknown_processor_type_is_named_not_the_parsers_internal_error(good_
     message = _error(bad)
     assert "unknown processor type 99" in message and "84 (Intel)" in message
     assert "local variable" not in message and "float_unpack" not in message
+
+
+def test_solving_or_filling_a_take_that_is_not_labeled_yet_says_label_it_first(good_c3d, capsys):
+    from mocap_autolabel.cli import main
+
+    for command in (["solve", str(good_c3d), "--layout", "han19"],
+                    ["fill", str(good_c3d), "--layout", "tips5", "-o", str(good_c3d.with_name("f.c3d"))]):
+        assert main(command) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and str(good_c3d) in err and "label it first" in err, err
+    assert not good_c3d.with_name("f.c3d").exists()

@@ -75,9 +75,12 @@ def split_hands(take: Take, layout: Layout, naming: HandNaming | None = None) ->
     (side ``""`` for a take labeled with plain names).
 
     Raises:
-        MocapInputError: no hand of ``layout`` is named in the take.
+        MocapInputError: no hand of ``layout`` is named in the take (or none of its points is).
     """
     found = hands_in_names(take.names, layout, naming)
+    if not found and take.unlabeled.all():
+        raise MocapInputError(take.source, "is not labeled yet (every point is unnamed): label it first "
+                                           "(the label command, or Label Markers in Blender)")
     if not found:
         sided = [n for n in take.names if re.search("|".join(re.escape(x) for x in layout.names), n)]
         hint = f" (names such as {', '.join(sided[:3])} do not follow a known hand naming)" if sided else ""
