@@ -239,7 +239,7 @@ PROCESSORS = {84: "Intel", 85: "DEC", 86: "MIPS"}
 def _parse_failure(meta: bytes, exc: Exception) -> str:
     """What a reader of the file can act on, instead of the parser's internal error: an unknown
     processor type, or where the parameters stop making sense."""
-    start = (meta[0] - 1) * 512 if meta and meta[0] >= 1 else -1
+    start = (meta[0] - 1) * BLOCK if meta and meta[0] >= 1 else -1
     if 0 <= start and start + 3 < len(meta) and meta[start + 3] not in PROCESSORS:
         known = ", ".join(f"{code} ({name})" for code, name in PROCESSORS.items())
         return f"unknown processor type {meta[start + 3]} in its first block; {known} expected"

@@ -383,15 +383,14 @@ def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarra
         col = m if label == NULL else label
         lower[np.flatnonzero((var_seg == s) & (var_lab == col))] = 1.0
     cost = np.concatenate([-weights[var_seg, var_lab], switch[links]])
-    integrality = np.concatenate([np.ones(n_pairs), np.zeros(len(links))])  # switches follow the labels
+    # Switches follow the labels; relaxed, nothing is integral.
+    integrality = np.zeros(n_vars) if relaxed else np.concatenate([np.ones(n_pairs), np.zeros(len(links))])
+    res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=integrality,
+               bounds=Bounds(lower, np.ones(n_vars)), options={"node_limit": int(node_limit)})
     if relaxed:
-        res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=np.zeros(n_vars),
-                   bounds=Bounds(lower, np.ones(n_vars)))
         # Rounded to ignore the last digits' noise: ties then go by gain, segment and label.
         priority = None if res.x is None else np.round(res.x[:n_pairs], 6)
         return _greedy_assignment(weights, segments, var_seg, var_lab, locked, switch, priority), False
-    res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=integrality,
-               bounds=Bounds(lower, np.ones(n_vars)), options={"node_limit": int(node_limit)})
     if res.status in (2, 3):  # all null but the locks is always a labeling: never here
         raise ValueError(f"no exclusive labeling exists: {res.message}")
     stopped = res.status != 0  # the work bound (HiGHS's node or solution limit) stopped the search
