@@ -168,3 +168,24 @@ def test_the_layout_command_writes_a_layout_from_a_labeled_take_and_refuses_a_ra
     assert main(["layout", "--from", str(tmp_path / "raw.c3d"), "-o", str(tmp_path / "raw.toml")]) == 1
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "no labeled point" in err and not (tmp_path / "raw.toml").exists()
+
+
+def test_a_one_hand_method_on_two_hands_labels_the_hand_with_more_samples_and_says_so():
+    from mocap_autolabel.core.labelers.gmm import GmmLabeler
+    from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take
+
+    layout = load_layout("tips5_hand3")
+    two = two_hand_take(layout, 240, seed=3, config=TwoHandConfig(close_share=0.0))
+    m = len(layout)
+    labeler = GmmLabeler(layout).fit(two.hands[0].markers)  # the left hand's performer
+    labeling = label_take(two.take, layout, LabelSettings(method="gmm"), labeler=labeler)
+    facts = labeling.info["hands"]
+    assert facts["count"] == 1 and "two hands found; gmm labels one hand" in facts["warning"]
+    per = labeling.per_sample()
+    truth_hand = np.where(two.labels >= 0, two.labels // m, -1)
+    labeled = per >= 0
+    # every label lies on one hand: the other's samples were kept out
+    assert labeled.sum() > 0.4 * (truth_hand >= 0).sum() / 2
+    assert len(np.unique(truth_hand[labeled & (truth_hand >= 0)])) == 1
+    with pytest.raises(ValueError, match="two hands are labeled with set"):
+        label_take(two.take, layout, LabelSettings(method="gmm", hand_count=2), labeler=labeler)

@@ -107,6 +107,21 @@ def remembered_hands(take: Take, layout: Layout, hands: str | int, ignore: np.nd
     return replace(found, both=found.both.copy(), hand=found.hand.copy(), info=dict(found.info))
 
 
+def one_of_two(take: Take, layout: Layout, found: Hands, ignore: np.ndarray | None, swaps: np.ndarray | None,
+               cache, method: str, joint: str) -> tuple[np.ndarray, Hands]:
+    """Two hands found for a method that labels one (``gmm``, ``nearest``): the hand with more samples,
+    the other's kept out (the ``ignore`` ``(F, P)`` returned), with a warning that says so. A sparse
+    layout's hand beside a body or a prop is often read as two."""
+    samples = [int((found.hand == h).sum()) for h in range(2)]
+    keep = int(np.argmax(samples))
+    other = (found.hand == 1 - keep) & ~found.both
+    ignore = other if ignore is None else other | (ignore if ignore.ndim == 2 else ignore[None, :])
+    one = remembered_hands(take, layout, "1", ignore, swaps, cache)
+    one.info["warning"] = (f"two hands found; {method} labels one hand, the one with more samples "
+                           f"({samples[keep]} against {samples[1 - keep]}); {joint} label both")
+    return ignore, one
+
+
 def find_hands_stage(run: LabelRun) -> Retry | None:
     """Which trajectories belong to which hand; the corrections brought to the hands' labels.
     Two hands with corrections and no sides given: a first pass decides the sides (corrections
@@ -125,7 +140,11 @@ def find_hands_stage(run: LabelRun) -> Retry | None:
     run.timed("hands", t0)
     if found.count == 2 and not run.method.labels_two_hands:
         joint = ", ".join(name for name, method in LABELERS.items() if method.labels_two_hands)
-        raise ValueError(f"two hands are labeled with {joint}, not {settings.method!r} (or force one hand: hands=1)")
+        if str(settings.hand_count) == "2":
+            raise ValueError(f"two hands are labeled with {joint}, not {settings.method!r} "
+                             "(or force one hand: hands=1)")
+        run.ignore, found = one_of_two(take, layout, found, ignore, run.swaps, run.cache, settings.method, joint)
+        run.found = found
     if found.count == 2 and settings.validate:
         raise ValueError("IK validation works on one hand; the take holds two (force one hand: hands=1)")
     run.labels = HandLabels(layout, found.count)
