@@ -18,8 +18,14 @@ from ..temporal.murty import nbest_labelings
 from .assign import assign
 from .base import Labeler
 
-#: Regularisation added to every covariance (metres^2): 1 mm standard deviation.
-_COV_FLOOR = 1e-6
+#: Regularisation added to every covariance of a performer's fit (metres): 1 mm standard deviation.
+PERFORMER_SPREAD = 0.001
+#: The same for the layout's synthetic range of motion, which stands in for a performer nobody
+#: measured: their hand's proportions and marker places differ from the model's by about this much
+#: (han2018 sparse sets: the fitted 1 mm left most fingertips outside every Gaussian).
+ROM_SPREAD = 0.02
+#: Poses of the average hand the range-of-motion fit is made on (drawn as the training frames are).
+ROM_POSES = 5000
 
 
 def hand_frame(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -32,15 +38,17 @@ def hand_frame(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray,
     return (a + b + c) / 3.0, np.stack([x, y, z], axis=-1)
 
 
-def fit_gmm(x: np.ndarray, components: int, rng: np.random.Generator, iters: int = 60) -> tuple:
-    """Expectation-maximisation of a full-covariance mixture on ``(n, 3)`` samples.
+def fit_gmm(x: np.ndarray, components: int, rng: np.random.Generator, iters: int = 60,
+            spread: float = PERFORMER_SPREAD) -> tuple:
+    """Expectation-maximisation of a full-covariance mixture on ``(n, 3)`` samples; ``spread`` (metres)
+    is added to every component's standard deviation along each axis, as a variance.
 
     Returns weights ``(C,)``, means ``(C, 3)``, covariances ``(C, 3, 3)``.
     """
     n = len(x)
     c = max(1, min(components, n))
     means = x[rng.choice(n, size=c, replace=False)]
-    cov = np.repeat((np.cov(x.T) + _COV_FLOOR * np.eye(3))[None], c, axis=0) if n > 1 else \
+    cov = np.repeat((np.cov(x.T) + spread ** 2 * np.eye(3))[None], c, axis=0) if n > 1 else \
         np.repeat(np.eye(3)[None] * 1e-4, c, axis=0)
     weights = np.full(c, 1.0 / c)
     for _ in range(iters):
@@ -51,7 +59,7 @@ def fit_gmm(x: np.ndarray, components: int, rng: np.random.Generator, iters: int
         weights = nk / n
         means = (r.T @ x) / nk[:, None]
         d = x[:, None, :] - means[None]
-        cov = np.einsum("nc,nci,ncj->cij", r, d, d) / nk[:, None, None] + _COV_FLOOR * np.eye(3)
+        cov = np.einsum("nc,nci,ncj->cij", r, d, d) / nk[:, None, None] + spread ** 2 * np.eye(3)
     return weights, means, cov
 
 
@@ -86,19 +94,22 @@ class GmmLabeler(Labeler):
         candidates: triangles tried per frame (the best-matching shapes): dense layouts have
             several triangles of about the right size, so the one whose hand frame gives the
             other points the highest likelihood wins.
+        spread: metres of standard deviation added to every Gaussian (a floor): the paper's tight
+            fit for the performer's own take; wider where the fitting take is not theirs.
     """
 
     name = "gmm"
 
     def __init__(self, layout: Layout, components: int = 3, rigid: list[str] | None = None,
                  theta_quantile: float = 0.005, theta_margin: float = 8.0, tolerance: float = 0.012,
-                 candidates: int = 6, seed: int = 0):
+                 candidates: int = 6, seed: int = 0, spread: float = PERFORMER_SPREAD):
         self.layout = layout
         self.components = components
         self.rigid_names = rigid
         self.theta_quantile, self.theta_margin = theta_quantile, theta_margin
         self.tolerance, self.candidates = tolerance, candidates
         self.seed = seed
+        self.spread = spread
         self.mixtures: list[tuple] = []
 
     def fit(self, markers: np.ndarray) -> GmmLabeler:
@@ -119,7 +130,7 @@ class GmmLabeler(Labeler):
             x = local[:, j][np.isfinite(local[:, j]).all(axis=1)]
             if len(x) < self.components:
                 raise ValueError(f"marker {self.layout.names[j]} has too few samples to fit")
-            mix = _prepared(*fit_gmm(x, self.components, rng))
+            mix = _prepared(*fit_gmm(x, self.components, rng, spread=self.spread))
             self.mixtures.append(mix)
             ll = np.logaddexp.reduce(_component_log_pdf(x, *mix), axis=1)
             self.theta[j] = np.quantile(ll, self.theta_quantile) - self.theta_margin
@@ -214,11 +225,14 @@ ROM_SCALES = (0.88, 0.94, 1.0, 1.06, 1.12)
 
 
 def range_of_motion_gmm(layout: Layout) -> GmmLabeler:
-    """A right-hand ``gmm`` labeler fitted on ``layout``'s synthetic range of motion (a fit takes
-    seconds: callers keep it in their :class:`..cache.RunCache`)."""
-    from ..synth.generate import range_of_motion
+    """A right-hand ``gmm`` labeler fitted on ``layout``'s markers on the model's average hand in
+    :data:`ROM_POSES` poses drawn over the joints' ranges (canonical poses, synergies, uniform
+    samples), with Gaussians :data:`ROM_SPREAD` wide (a fit takes seconds: callers keep it in their
+    :class:`..cache.RunCache`). Independent poses cover the ranges a short random motion leaves
+    out (a fist, one finger bent)."""
+    from ..synth.generate import pose_samples
 
-    return GmmLabeler(layout).fit(range_of_motion(layout, side="right"))
+    return GmmLabeler(layout, spread=ROM_SPREAD).fit(pose_samples(layout, ROM_POSES, side="right"))
 
 
 class ScaledLabeler(Labeler):

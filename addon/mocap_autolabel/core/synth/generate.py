@@ -19,7 +19,7 @@ import numpy as np
 
 from ..atomic import atomic_output
 from ..formats.c3d import write_c3d
-from ..hand.skeleton import BONE_NAMES, HandModel, sample_hand_size
+from ..hand.skeleton import BONE_NAMES, N_DOF, HandModel, sample_hand_size
 from ..hand.skin import Binding, blend, blend_directions
 from ..layout import Layout
 from ..take import Take
@@ -35,7 +35,7 @@ from .corrupt import (
     persistent_ghosts,
 )
 from .motion import MotionConfig, generate_motion, min_jerk
-from .poses import CANONICAL_POSES
+from .poses import CANONICAL_POSES, sample_joint_angles
 from .truth import truth_path
 
 GHOST = -1  #: truth label of a ghost sample
@@ -501,9 +501,12 @@ def touch(hand: HandModel, poses: np.ndarray, finger: str, bone: str = "dist", a
     return out, np.linalg.norm(pads[:, 0] - pads[:, 1], axis=1)
 
 
-def range_of_motion(layout: Layout, frames: int = 1200, seed: int = 0, side: str = "right") -> np.ndarray:
-    """The layout's markers ``(frames, M, 3)`` (metres, layout order, no gaps or noise) on the
-    model's average hand moving through the generator's random motion (canonical poses,
-    synergies, uniform samples): a labeled take of no one in particular, for labelers that must
-    be fitted on one (``gmm``) when the performer's own is not given."""
-    return marker_motion(layout, HandModel(side=side), frames, seed=seed)[1]
+def pose_samples(layout: Layout, n: int, seed: int = 0, side: str = "right") -> np.ndarray:
+    """The layout's markers ``(n, M, 3)`` (metres, layout order, hand frame, no noise) on the model's
+    average hand in ``n`` independent poses drawn as the training frames draw them
+    (:func:`.poses.sample_joint_angles`): the whole range of every joint, not one motion through it."""
+    hand = HandModel(side=side)
+    poses = np.zeros((n, N_DOF))
+    poses[:, 6:] = sample_joint_angles(np.random.default_rng(seed), n)
+    return blend(*hand.skinning_transforms(poses), layout.place(hand)[0])
+
