@@ -187,5 +187,5 @@ def test_a_one_hand_method_on_two_hands_labels_the_hand_with_more_samples_and_sa
     # every label lies on one hand: the other's samples were kept out
     assert labeled.sum() > 0.4 * (truth_hand >= 0).sum() / 2
     assert len(np.unique(truth_hand[labeled & (truth_hand >= 0)])) == 1
-    with pytest.raises(ValueError, match="two hands are labeled with set"):
+    with pytest.raises(MocapInputError, match="two hands are labeled with set, perm, cnn, not gmm"):
         label_take(two.take, layout, LabelSettings(method="gmm", hand_count=2), labeler=labeler)

@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..errors import MocapInputError
 from ..hands import (
     DEFAULT_NAMING,
     HAND_RADIUS,
@@ -141,8 +142,8 @@ def find_hands_stage(run: LabelRun) -> Retry | None:
     if found.count == 2 and not run.method.labels_two_hands:
         joint = ", ".join(name for name, method in LABELERS.items() if method.labels_two_hands)
         if str(settings.hand_count) == "2":
-            raise ValueError(f"two hands are labeled with {joint}, not {settings.method!r} "
-                             "(or force one hand: hands=1)")
+            raise MocapInputError(take.source or None, f"two hands are labeled with {joint}, not {settings.method} "
+                                        "(it labels one hand: leave the hand count to the take, or give 1)")
         run.ignore, found = one_of_two(take, layout, found, ignore, run.swaps, run.cache, settings.method, joint)
         run.found = found
     if found.count == 2 and settings.validate:
