@@ -189,3 +189,17 @@ def test_a_one_hand_method_on_two_hands_labels_the_hand_with_more_samples_and_sa
     assert len(np.unique(truth_hand[labeled & (truth_hand >= 0)])) == 1
     with pytest.raises(MocapInputError, match="two hands are labeled with set, perm, cnn, not gmm"):
         label_take(two.take, layout, LabelSettings(method="gmm", hand_count=2), labeler=labeler)
+
+
+def test_two_sparse_hands_apart_stay_two_hands_when_few_labels_are_confident():
+    # A fingertip-only layout labels few samples confidently; two hands a forearm apart were then
+    # read as one hand (which spread one layout over both and lost every label).
+    from mocap_autolabel.core.synth.two_hands import TwoHandConfig, two_hand_take
+
+    layout = load_layout("tips5")
+    two = two_hand_take(layout, 300, seed=0, config=TwoHandConfig(close_share=0.0))
+    labeling = label_take(two.take, layout)
+    facts = labeling.info["hands"]
+    assert facts["count"] == 2 and "two_hands_rejected" not in facts
+    per, ok = labeling.per_sample(), two.take.valid & (two.labels >= 0)
+    assert (per[ok] == two.labels[ok]).mean() > 0.6

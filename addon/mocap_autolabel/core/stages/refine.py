@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..hands import identity_swaps, swap_ranges
+from ..hands import HAND_RADIUS, Hands, identity_swaps, swap_ranges
 from ..labeling import Labeling
 from ..props import Prop, find_props, prop_mask, rigid_groups
 from ..take import Take
@@ -72,6 +72,17 @@ def validate_stage(run: LabelRun) -> None:
     run.timed("validate", t)
 
 
+def hands_apart(found: Hands) -> bool:
+    """Whether the two hands found are too far apart to be one hand split in two: their centres
+    farther than :data:`..hands.HAND_RADIUS` in the median frame where both are seen. (A sparse
+    layout's two hands label few samples confidently; read as one hand, they lost every label.)"""
+    both = np.isfinite(found.centre).all(axis=(1, 2))
+    if not both.any():
+        return False
+    gap = np.linalg.norm(found.centre[both, 0] - found.centre[both, 1], axis=1)
+    return bool(np.median(gap) > HAND_RADIUS)
+
+
 def one_hand_stage(run: LabelRun) -> Retry | None:
     """Two hands must explain the take better than one: a hand with more markers than the layout
     (a han19 glove labeled with glove13) also splits into two groups of points. Where two hands
@@ -79,6 +90,8 @@ def one_hand_stage(run: LabelRun) -> Retry | None:
     hand, which is kept unless two hands do clearly better."""
     settings = run.settings
     if not (run.found.count == 2 and str(settings.hand_count) == "auto" and not run.constraints):
+        return None
+    if hands_apart(run.found):
         return None
     two = run.labeling.summary()["confident_share"]
     if two >= DOUBTFUL_SHARE:
