@@ -72,12 +72,18 @@ def validate_stage(run: LabelRun) -> None:
     run.timed("validate", t)
 
 
+#: Share of the take's frames each of two hands apart must be seen in to never be read as one.
+BOTH_PRESENT = 0.5
+
+
 def hands_apart(found: Hands) -> bool:
-    """Whether the two hands found are too far apart to be one hand split in two: their centres
-    farther than :data:`..hands.HAND_RADIUS` in the median frame where both are seen. (A sparse
-    layout's two hands label few samples confidently; read as one hand, they lost every label.)"""
+    """Whether the two hands found are too far apart to be one hand split in two: both seen in
+    :data:`BOTH_PRESENT` of the frames, their centres farther than :data:`..hands.HAND_RADIUS` in
+    the median frame where both are. (A sparse layout's two hands label few samples confidently;
+    read as one hand, they lost every label. One hand's points and a few ghosts, found as two
+    hands, are seen together in fewer frames.)"""
     both = np.isfinite(found.centre).all(axis=(1, 2))
-    if not both.any():
+    if not both.any() or min(found.info.get("present_share", [0.0])) < BOTH_PRESENT:
         return False
     gap = np.linalg.norm(found.centre[both, 0] - found.centre[both, 1], axis=1)
     return bool(np.median(gap) > HAND_RADIUS)
