@@ -36,7 +36,8 @@ venv: $(VENV)/.extras-$(DEMO_EXTRAS)
 ## report) -> the labeled markers' gaps filled from that hand (out/demo_filled.c3d, fills marked as computed);
 ## also the raw take alone and beside the hand that made it; then a synthetic take of two interacting hands,
 ## labeled (L_/R_ names, scored against its truth) into a review scene with both solved hands; a sparse finger set
-## (5 tips + a hand cluster) labeled with no model of its own; a layout TOML fitted from the labeled demo take; and
+## (5 tips + a hand cluster) labeled with no model of its own, and by gmm (Alexanderson 2016) fitted on the layout's
+## synthetic range of motion; a layout TOML fitted from the labeled demo take; and
 ## the solved hand retargeted onto a character (Rigify's human meta-rig: .blend and FBX) and exported for Unreal
 demo: $(VENV)/.extras-$(DEMO_EXTRAS)
 	$(BIN)/python -m mocap_autolabel info samples/demo_take.c3d
@@ -50,11 +51,12 @@ demo: $(VENV)/.extras-$(DEMO_EXTRAS)
 	$(BIN)/python -m mocap_autolabel label out/demo_two_hands.c3d --layout han19 -o out/demo_two_hands_labeled.c3d --blend out/demo_two_hands_review.blend --solve-hand
 	$(BIN)/python -m mocap_autolabel synth --layout tips5_hand3 --frames 1200 --seed 3 -o out/demo_sparse.c3d
 	$(BIN)/python -m mocap_autolabel label out/demo_sparse.c3d --layout tips5_hand3 -o out/demo_sparse_labeled.c3d --report out/demo_sparse_report.json
+	$(BIN)/python -m mocap_autolabel label out/demo_sparse.c3d --layout tips5_hand3 --method gmm -o out/demo_sparse_gmm.c3d
 	$(BIN)/python -m mocap_autolabel layout --from out/demo_labeled.c3d -o out/demo_layout.toml
 	$(BIN)/python samples/make_character.py out/character.blend
 	$(BIN)/python -m mocap_autolabel solve out/demo_labeled.c3d --layout han19 --calibration out/demo_calibration.json --retarget out/character.blend --pinch --blend out/demo_character.blend --fbx out/demo_character.fbx
 	$(BIN)/python -m mocap_autolabel solve out/demo_labeled.c3d --layout han19 --calibration out/demo_calibration.json --fbx out/demo_hand_ue5.fbx --bone-names ue5
-	@echo "demo: open out/demo_review.blend in Blender with the add-on (Mocap tab > Review: labels coloured by confidence + the solved hand), out/demo_hand.blend (solved rig), out/demo.blend (the raw take), out/demo_truth.blend (raw take + the true hand), out/demo_two_hands_review.blend (two hands: Left hand / Right hand labels + Hand_L / Hand_R), out/demo_sparse_labeled.c3d (a sparse finger set), out/demo_layout.toml (a layout fitted from a labeled take), out/demo_character.blend (the hand on a character's rig, NLA track 'Mocap hands') and out/demo_hand_ue5.fbx (UE5 bone names, Z up, centimetres)"
+	@echo "demo: open out/demo_review.blend in Blender with the add-on (Mocap tab > Review: labels coloured by confidence + the solved hand), out/demo_hand.blend (solved rig), out/demo.blend (the raw take), out/demo_truth.blend (raw take + the true hand), out/demo_two_hands_review.blend (two hands: Left hand / Right hand labels + Hand_L / Hand_R), out/demo_sparse_labeled.c3d (a sparse finger set; out/demo_sparse_gmm.c3d by gmm), out/demo_layout.toml (a layout fitted from a labeled take), out/demo_character.blend (the hand on a character's rig, NLA track 'Mocap hands') and out/demo_hand_ue5.fbx (UE5 bone names, Z up, centimetres)"
 
 ## test: ruff, then every test (real-data tests skip when ../shared/data is absent)
 test: $(VENV)/.extras-$(TEST_EXTRAS) lint
