@@ -610,3 +610,19 @@ def test_the_panel_says_why_perm_leaves_every_segment_for_review(empty_scene, bp
     assert bpy.ops.mocap_autolabel.label(method="perm") == {"FINISHED"}
     s = summary(load_state(coll).labeling, sure)
     assert s["never_confident"] and s["confident"] == 0.0
+
+
+def test_the_panel_says_gmm_has_no_calibration_for_a_sparse_layout(empty_scene, bpy_module, tmp_path):
+    from mocap_autolabel.blender.review import load_state, summary
+    from mocap_autolabel.core.layout import load_layout
+    from mocap_autolabel.core.synth.generate import save_synth, synthesize
+
+    bpy = bpy_module
+    path = tmp_path / "sparse.c3d"
+    save_synth(synthesize(load_layout("tips5_hand3"), 240, seed=2), str(path))
+    assert bpy.ops.mocap_autolabel.import_markers(filepath=str(path)) == {"FINISHED"}
+    settings = empty_scene.mocap_autolabel
+    settings.layout = "tips5_hand3"
+    assert bpy.ops.mocap_autolabel.label(method="gmm") == {"FINISHED"}
+    s = summary(load_state(settings.take).labeling, settings.sure)
+    assert s["never_confident"] == "uncalibrated" and s["confident"] == 0.0

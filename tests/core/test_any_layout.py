@@ -203,3 +203,22 @@ def test_two_sparse_hands_apart_stay_two_hands_when_few_labels_are_confident():
     assert facts["count"] == 2 and "two_hands_rejected" not in facts
     per, ok = labeling.per_sample(), two.take.valid & (two.labels >= 0)
     assert (per[ok] == two.labels[ok]).mean() > 0.6
+
+
+def test_gmm_on_a_layout_without_a_calibration_rates_no_segment_confident(tmp_path, capsys):
+    # Its probabilities were never measured against the truth on tips5_hand3: a high one is no promise.
+    from mocap_autolabel.core.review import SURE
+
+    layout = load_layout("tips5_hand3")
+    synth = synthesize(layout, 300, seed=2)
+    labeling = label_take(synth.take, layout, LabelSettings(method="gmm"))
+    assert labeling.info["never_confident"] == "uncalibrated"
+    assert (labeling.confidence < SURE).all() and (labeling.label >= 0).any()
+    assert "never_confident" not in label_take(synth.take, layout).info  # set's own probabilities stand
+    take = tmp_path / "sparse.c3d"
+    save_synth(synth, str(take))
+    out_path = str(tmp_path / "o.c3d")
+    assert main(["label", str(take), "--layout", "tips5_hand3", "--method", "nearest", "-o", out_path]) == 0
+    out = capsys.readouterr().out
+    assert "nearest has no confidence calibration for tips5_hand3" in out
+    assert "0.0 % of labeled samples confident" in out

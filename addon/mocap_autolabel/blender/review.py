@@ -273,8 +273,9 @@ def summary(labeling: Labeling, sure: float, first: int = 0) -> dict:
             "hands": hands, "hands_warning": facts.get("warning"),
             "hands_traded": traded_text(facts.get("swaps", []), first),
             "props": _props_line(labeling.info.get("props", [])),
-            # perm and cnn: their calibrated confidence never reaches the bar (see the CLI's note)
-            "never_confident": bool(labeling.info.get("never_confident"))}
+            # perm and cnn: their calibrated confidence never reaches the bar (see the CLI's note);
+            # "uncalibrated": gmm or nearest on a layout without a calibration
+            "never_confident": labeling.info.get("never_confident") or False}
 
 
 def _props_line(props: list[dict]) -> str | None:

@@ -111,7 +111,10 @@ def _label(args) -> int:
     if labeler_method(args.method).fits_performer and not args.fit:
         print(f"  note     gmm fitted on the {layout.name} synthetic range of motion: give --fit LABELED, a labeled "
               f"take of the performer, for a fit to their hand")
-    if labeling.info.get("never_confident"):
+    if labeling.info.get("never_confident") == "uncalibrated":
+        print(f"  note     {args.method} has no confidence calibration for {layout.name}: its probabilities were never "
+              f"measured against the truth there, so no segment is rated confident and every one is left for review")
+    elif labeling.info.get("never_confident"):
         print(f"  note     {args.method} + {args.temporal} never rates a segment confident on {layout.name}: on "
               f"synthetic validation takes none of its segments were right 99.9 % of the time, so all are left "
               f"for review (set is the method whose confident segments can be skipped)")

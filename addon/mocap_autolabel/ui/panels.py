@@ -147,7 +147,12 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
         box.label(text=f"Labels present: {s['labels']}")
         box.label(text=f"Confident: {s['confident']:.1f} % of labeled samples")
         box.label(text=f"To review: {settings.uncertain_total} of {s['uncertain']} uncertain   Locked: {s['locked']}")
-        if s["never_confident"]:  # calibrated, and honestly never sure: every segment is for review
+        if s["never_confident"] == "uncalibrated":  # no calibration for this layout: nothing is sure
+            col = layout.box().column(align=True)
+            col.label(text=f"{state.method} has no confidence calibration for this layout", icon="INFO")
+            col.label(text="(its probabilities were never measured against the truth):")
+            col.label(text="every segment is left for review")
+        elif s["never_confident"]:  # calibrated, and honestly never sure: every segment is for review
             col = layout.box().column(align=True)
             col.label(text=f"{state.method} + {state.temporal} never rates a segment confident", icon="INFO")
             col.label(text="(none was right 99.9 % of the time in validation):")

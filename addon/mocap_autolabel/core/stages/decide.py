@@ -15,6 +15,7 @@ import numpy as np
 
 from ..labeling import EMPTY, NULL, Labeling, segments_from_runs
 from ..temporal.confidence import (
+    SURE,
     load_calibration,
     load_continuity,
     load_null_prior,
@@ -225,6 +226,11 @@ def calibrate_confidence(run: LabelRun, labeling: Labeling, samples: Samples) ->
     calibration = load_calibration(s.method, s.temporal, run.layout.name) if s.calibrate_confidence else None
     if calibration is not None:
         labeling.confidence = calibration(labeling.evidence, labeled=labeling.label >= 0)
+    elif s.calibrate_confidence and not run.method.sure_of_itself:
+        # gmm or nearest on a layout nobody calibrated them for: their probabilities were never
+        # measured against the truth there, and a high one is no promise, so none is sure.
+        labeling.confidence = np.minimum(labeling.confidence, SURE - 1e-3)
+        run.info["never_confident"] = "uncalibrated"
     labeling.confidence[labeling.locked] = 1.0
     run.info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
     if calibration is not None and calibration.never_sure:
