@@ -509,4 +509,3 @@ def pose_samples(layout: Layout, n: int, seed: int = 0, side: str = "right") -> 
     poses = np.zeros((n, N_DOF))
     poses[:, 6:] = sample_joint_angles(np.random.default_rng(seed), n)
     return blend(*hand.skinning_transforms(poses), layout.place(hand)[0])
-
