@@ -79,6 +79,22 @@ def test_label_demo_take_writes_labeled_c3d_report_and_labels(capsys, tmp_path):
     assert saved["labels"].shape == saved["confidence"].shape == (1200, raw.n_points)
 
 
+def test_the_truth_line_scores_by_label_name_and_not_a_one_hand_labeling_of_two_hands(capsys, tmp_path):
+    # A two-hand truth (L_ and R_ labels) holds nothing to score a labeling of one hand's labels by;
+    # read as two hands, each label is scored against its own name's truth.
+    take = tmp_path / "two.c3d"
+    assert main(["synth", "--layout", "han19", "--hands", "2", "--frames", "200", "--seed", "3", "-o", str(take)]) == 0
+    capsys.readouterr()
+    report = tmp_path / "r.json"
+    assert main(["label", str(take), "--hands", "1", "--report", str(report)]) == 0
+    text = capsys.readouterr().out
+    assert "not scored: it names 38 labels (L_ThumbCMC...), this labeling 19 (ThumbCMC...)" in text
+    assert "% correct" not in text and "truth" not in json.loads(report.read_text())
+    assert main(["label", str(take), "--report", str(report)]) == 0
+    assert "% correct" in capsys.readouterr().out
+    assert json.loads(report.read_text())["truth"]["accuracy"] > 0.95
+
+
 def test_label_with_the_wrong_layout_warns_or_refuses_and_names_the_right_one(capsys, tmp_path):
     take = tmp_path / "glove.c3d"  # a glove13 take labeled with han19: a hand, but the wrong layout
     write_c3d(synthesize(load_layout("glove13"), 300, seed=4).take, take)  # half a han19 hand in most frames

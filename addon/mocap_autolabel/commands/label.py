@@ -31,7 +31,7 @@ def _label(args) -> int:
     from ..core.layout import load_layout
     from ..core.process import Outputs, performer_inputs, process_take, work_limit_warning
     from ..core.quiet import silenced_stdout
-    from ..core.synth.truth import load_truth, truth_path
+    from ..core.synth.truth import load_truth, truth_labels, truth_path
     from ..core.take import read_take
 
     if args.output and not args.output.lower().endswith(".c3d"):
@@ -127,12 +127,17 @@ def _label(args) -> int:
     if os.path.isfile(tpath):
         from ..core.metrics import score_labeling
 
-        truth = load_truth(tpath)["labels"]
-        score = score_labeling(labeling.per_sample(), truth, take.valid, len(labeling.names))
-        report["truth"] = score.as_dict()
-        print(f"  truth    {tpath}: {100 * score.accuracy:.2f} % correct, {100 * score.frame_accuracy:.2f} % of frames "
-              f"all correct ({score.erroneous} erroneous, {score.false_marker} false marker, "
-              f"{score.false_occlusion} false occlusion)")
+        sidecar = load_truth(tpath)
+        per = truth_labels(labeling, sidecar["info"].get("names", labeling.names))
+        if per is None:
+            print(f"  truth    {tpath}: not scored: it names {len(sidecar['info']['names'])} labels "
+                  f"({sidecar['info']['names'][0]}...), this labeling {len(labeling.names)} ({labeling.names[0]}...)")
+        else:
+            score = score_labeling(per, sidecar["labels"], take.valid, len(labeling.names))
+            report["truth"] = score.as_dict()
+            print(f"  truth    {tpath}: {100 * score.accuracy:.2f} % correct, {100 * score.frame_accuracy:.2f} % of "
+                  f"frames all correct ({score.erroneous} erroneous, {score.false_marker} false marker, "
+                  f"{score.false_occlusion} false occlusion)")
     if filled is not None:
         report["fill"] = filled.report()
         print(f"  filled   {_fill_line(filled)}")
