@@ -31,7 +31,7 @@ from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.metrics import score_labeling, segments_right
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.settings import LabelSettings
-from mocap_autolabel.core.synth.generate import SynthConfig, corrupt_take, synthesize
+from mocap_autolabel.core.synth.generate import SynthConfig, TakeCorruption, corrupt_take, synthesize
 from mocap_autolabel.core.take import Take
 from mocap_autolabel.core.temporal.confidence import (
     CALIBRATIONS,
@@ -39,6 +39,7 @@ from mocap_autolabel.core.temporal.confidence import (
     fit_calibration,
     load_continuity,
     load_null_prior,
+    load_occlusion_prior,
     load_partner,
     load_switch_cost,
 )
@@ -231,11 +232,12 @@ def fit_vote_settings(data: list, layout, method: str, labelers: list, prior: fl
 
 
 def shipped_grids(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> dict:
-    """The shares tried when the shipped switch cost, prior and partner evidence were fitted (as
-    written in the calibration file), for a run that fits only the continuity evidence."""
+    """The shares tried when the shipped switch cost, prior, partner and continuity evidence were
+    fitted (as written in the calibration file), for a run that fits only some of them."""
     with open(path, encoding="utf-8") as fh:
         entry = json.load(fh).get(calibration_key(method, temporal, layout), {})
-    return {"switch_cost": entry.get("switch_cost_tried", {}), "prior_partner": entry.get("prior_partner_tried", {})}
+    return {"switch_cost": entry.get("switch_cost_tried", {}), "prior_partner": entry.get("prior_partner_tried", {}),
+            "continuity": entry.get("continuity_tried", {})}
 
 
 #: How the calibration file writes the settings of each grid of :func:`fit_vote_settings`.
@@ -254,6 +256,46 @@ def shipped_layouts() -> list[str]:
     return sorted(f[len("set_"):-len(".onnx")] for f in os.listdir(MODELS_DIR)
                   if f.startswith("set_") and f.endswith(".onnx")
                   and not load_card(os.path.join(MODELS_DIR, f))["input"].get("layout_conditioned"))
+#: Occlusions the occlusion prior is fitted on, beside the validation takes as they are: their true
+#: tracks with a marker hidden 40, 90 or 140 times a minute for about 15 frames at 120 Hz, ghosts
+#: that stay and noise (the heaviest about ``benchmarks/occlusion.py``'s).
+OCCLUSIONS = tuple(TakeCorruption(gaps_per_minute=g, mean_gap_s=0.125, persistent_ghosts=p, noise_sd=sd)
+                   for g, p, sd in ((40.0, 1, 0.0005), (90.0, 2, 0.001), (140.0, 3, 0.001)))
+#: Validation takes (the first ones) each occlusion is applied to.
+OCCLUSION_TAKES = 48
+#: Occlusion priors tried, ``(knee, slope)``: breaks a second, nats per sample per break a second.
+OCCLUSION_PRIORS = tuple((knee, slope) for knee in (0.4, 0.6, 0.8) for slope in (0.5, 1.0, 1.5, 2.0, 3.0, 4.0)) + \
+    ((0.0, 0.0),)
+
+
+def occluded_takes(data: list, takes: int = OCCLUSION_TAKES) -> list:
+    """The first ``takes`` validation takes' true tracks under each of :data:`OCCLUSIONS`, as
+    (take, truth, true markers) triples."""
+    out = []
+    for level, cfg in enumerate(OCCLUSIONS):
+        for i, (take, _, markers) in enumerate(data[:takes]):
+            occluded, truth, _ = corrupt_take(markers[FIT_FRAMES:], take.rate, seed=SEED0 + 10_000 * (level + 1) + i,
+                                              cfg=cfg)
+            out.append((occluded, truth, markers))
+    return out
+
+
+def fit_occlusion_prior(data: list, layout, method: str, **fixed) -> tuple[tuple[float, float], dict]:
+    """The occlusion prior from :data:`OCCLUSION_PRIORS`: the mean share of correct instances over
+    the first :data:`OCCLUSION_TAKES` validation takes as they are and under each of
+    :data:`OCCLUSIONS`; of the settings within :data:`PRIOR_TOLERANCE` of the best, the gentlest
+    (smallest slope, then highest knee). Returns it and the mean shares (%) tried."""
+    occluded = occluded_takes(data)
+    n = len(occluded) // len(OCCLUSIONS)
+    levels = [data[:n]] + [occluded[i * n:(i + 1) * n] for i in range(len(OCCLUSIONS))]
+    per_level = []
+    for takes in levels:
+        labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in takes]
+        per_level.append(vote_shares(takes, layout, method, labelers,
+                                     [{"occlusion_prior": g} for g in OCCLUSION_PRIORS], **fixed))
+    tried = {g: tuple(round(float(np.mean([shares[j][k] for shares in per_level])), 4) for k in range(2))
+             for j, g in enumerate(OCCLUSION_PRIORS)}
+    return min(near_best(tried), key=lambda g: (g[1], -g[0])), tried
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -265,10 +307,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--layouts", nargs="*", help="layouts (default: every shipped one; one process per layout "
                                                  "runs them side by side into the same --out)")
     ap.add_argument("--out", default=CALIBRATIONS)
-    ap.add_argument("--fit", choices=("all", "continuity"), default="all",
+    ap.add_argument("--fit", choices=("all", "continuity", "occlusion"), default="all",
                     help="vote settings of the default pipeline to fit: all of them in turn (default; an hour "
-                         "or more per layout), or only the continuity evidence at the shipped switch cost, "
-                         "prior and partner evidence (minutes)")
+                         "or more per layout), or only the continuity evidence, or only the occlusion prior, "
+                         "at the shipped rest")
     args = ap.parse_args(argv)
     table = {}  # the calibrations made by this run
     for name in args.layouts or shipped_layouts():
@@ -278,6 +320,7 @@ def main(argv: list[str] | None = None) -> int:
         for method, temporal in combos:
             seg = []
             prior, switch, partner, continuity, tried = 0.0, 0.0, (0.0, 0.0), (0.0, 0.0), {}
+            occlusion = (0.0, 0.0)
             labelers = [None] * len(data)
             if (method, temporal) in PRIOR_COMBOS:
                 labelers = [RememberingLabeler(make_labeler(method, layout)) for _ in data]  # score each take once
@@ -286,7 +329,16 @@ def main(argv: list[str] | None = None) -> int:
                 # the continuity evidence, at the shipped rest).
                 prior = load_null_prior(method, temporal, name, args.out)[0]
                 partner = load_partner(method, temporal, name, args.out)
-                if args.fit == "continuity":
+                occlusion = load_occlusion_prior(method, temporal, name, args.out)
+                if args.fit == "occlusion":
+                    switch = load_switch_cost(method, temporal, name, args.out)[1]
+                    continuity = load_continuity(method, temporal, name, args.out)
+                    occlusion, occlusion_tried = fit_occlusion_prior(
+                        data, layout, method, switch_cost=(0.0, switch), null_prior=(prior, 0.0), partner=partner,
+                        continuity=continuity)
+                    tried = {**shipped_grids(method, temporal, name, args.out),
+                             "occlusion_prior": {str(list(k)): v for k, v in occlusion_tried.items()}}
+                elif args.fit == "continuity":
                     switch = load_switch_cost(method, temporal, name, args.out)[1]
                     continuity, tried["continuity"] = fit_continuity(
                         data, layout, method, labelers, switch_cost=(0.0, switch), null_prior=(prior, 0.0),
@@ -298,17 +350,19 @@ def main(argv: list[str] | None = None) -> int:
                         load_continuity(method, temporal, name, args.out))
                     tried = grid_keys(tried)
                 print(f"{name} {method}+{temporal}: switch cost {switch} nats, null prior {prior} nats per tracklet, "
-                      f"partner evidence {partner}, continuity {continuity}; correct % tried: {tried}", file=sys.stderr)
+                      f"partner evidence {partner}, continuity {continuity}, occlusion prior {occlusion}; "
+                      f"correct % tried: {tried}", file=sys.stderr)
             elif (method, temporal) in BORROWED_VOTE:
                 donor = BORROWED_VOTE[method, temporal]
                 prior = load_null_prior(donor, temporal, name, args.out)[0]
                 switch = load_switch_cost(donor, temporal, name, args.out)[1]
                 partner = load_partner(donor, temporal, name, args.out)
                 continuity = load_continuity(donor, temporal, name, args.out)
+                occlusion = load_occlusion_prior(donor, temporal, name, args.out)
             for (take, truth, markers), labeler in zip(data, labelers):
                 settings = LabelSettings(method=method, temporal=temporal, calibrate_confidence=False,
                                          null_prior=(prior, 0.0), switch_cost=(0.0, switch), partner=partner,
-                                         continuity=continuity)
+                                         continuity=continuity, occlusion_prior=occlusion)
                 options = {"labeler": labeler}
                 if method == "gmm":
                     options["labeler"] = GmmLabeler(layout).fit(markers[:FIT_FRAMES])
@@ -324,13 +378,16 @@ def main(argv: list[str] | None = None) -> int:
             if (method, temporal) in BORROWED_VOTE:  # stored with the calibration: label_take reads them here
                 table[calibration_key(method, temporal, name)].update(
                     null_prior=[prior, 0.0], switch_cost=[0.0, switch], partner=list(partner),
-                    continuity=list(continuity), vote_settings_from=f"{BORROWED_VOTE[method, temporal]}/{temporal}")
+                    continuity=list(continuity), occlusion_prior=list(occlusion),
+                    vote_settings_from=f"{BORROWED_VOTE[method, temporal]}/{temporal}")
             if tried:
                 table[calibration_key(method, temporal, name)].update(
                     null_prior=[prior, 0.0], switch_cost=[0.0, switch],
                     switch_cost_tried=tried["switch_cost"], partner=list(partner),
                     prior_partner_tried=tried["prior_partner"],
-                    continuity=list(continuity), continuity_tried=tried["continuity"])
+                    continuity=list(continuity), continuity_tried=tried["continuity"], occlusion_prior=list(occlusion))
+                if "occlusion_prior" in tried:
+                    table[calibration_key(method, temporal, name)]["occlusion_prior_tried"] = tried["occlusion_prior"]
             hi = cal(evidence, labeled=labeled) >= 0.95  # as the pipeline calls it
             print(f"{name} {method}+{temporal}: {len(seg)} segments, {100 * right.mean():.2f} % right; "
                   f"{100 * hi.mean():.1f} % at >= 0.95, of which {100 * right[hi].mean() if hi.any() else 0:.3f} % "

@@ -213,6 +213,7 @@ def test_gmm_on_a_layout_without_a_calibration_rates_no_segment_confident(tmp_pa
     synth = synthesize(layout, 300, seed=2)
     labeling = label_take(synth.take, layout, LabelSettings(method="gmm"))
     assert labeling.info["never_confident"] == "uncalibrated"
+    assert labeling.info["confidence"] == "capped below sure (no calibration for this layout)"
     assert (labeling.confidence < SURE).all() and (labeling.label >= 0).any()
     assert "never_confident" not in label_take(synth.take, layout).info  # set's own probabilities stand
     take = tmp_path / "sparse.c3d"

@@ -23,6 +23,7 @@ from mocap_autolabel.core.temporal.confidence import (
     fit_calibration,
     load_continuity,
     load_null_prior,
+    load_occlusion_prior,
     load_partner,
     load_switch_cost,
     split_doubtful_edges,
@@ -47,7 +48,7 @@ from mocap_autolabel.core.temporal.voting import (
     tracklet_share,
     vote,
 )
-from mocap_autolabel.core.tracklets import find_crossings
+from mocap_autolabel.core.tracklets import break_rate, find_crossings
 
 
 def _segments(starts, stops, slots=None) -> Segments:
@@ -240,6 +241,41 @@ def test_null_prior_is_paid_once_per_segment():
     assert labels.tolist() == [0, 0]
     _, labels, _, _ = vote(samples, segs, locked_at, split_swaps=False, null_prior=(4.0, 0.0))  # lead 3 x 0.69
     assert labels.tolist() == [NULL, 0]
+
+
+def test_break_rate_counts_trajectory_ends_before_the_last_frame_per_second_tracked():
+    valid = np.zeros((240, 3), dtype=bool)
+    valid[:, 0] = True  # tracked throughout: no break
+    valid[:100, 1] = valid[130:, 1] = True  # one break
+    valid[50:52, 2] = True  # a two-frame flicker is no trajectory
+    # 240 + 100 + 110 frames tracked at 120 Hz: 3.75 s, one end before the last frame.
+    assert break_rate(valid, 120.0) == pytest.approx(1 / 3.75)
+    assert break_rate(valid, 60.0) == pytest.approx(1 / 7.5)
+    assert break_rate(np.zeros((10, 2), dtype=bool), 120.0) == 0.0
+
+
+def test_the_occlusion_prior_keeps_more_markers_under_heavy_occlusion_and_leaves_other_takes_alone():
+    layout = load_layout("han19")
+    knee, slope = load_occlusion_prior("set", "vote", "han19")
+    assert knee > 0.0 and slope > 0.0  # fitted by training.confidence --fit occlusion
+    s = synthesize(layout, 900, seed=7)
+    heavy = TakeCorruption(gaps_per_minute=138, mean_gap_s=0.125, persistent_ghosts=3, noise_sd=0.001)
+    take, truth, _ = corrupt_take(s.markers, s.take.rate, seed=7, cfg=heavy)
+    shipped = label_take(take, layout)
+    without = label_take(take, layout, LabelSettings(occlusion_prior=(0.0, 0.0)))
+    assert shipped.info["break_rate"] > knee + 0.5 and shipped.info["occlusion_prior"] == [knee, slope]
+    marker = take.valid & (truth >= 0)
+
+    def counts(labeling):
+        per = labeling.per_sample()
+        return int((per[marker] == NULL).sum()), int((per[marker] == truth[marker]).sum())
+
+    (null_with, right_with), (null_without, right_without) = counts(shipped), counts(without)
+    assert null_with < null_without and right_with > right_without
+    # A take whose trajectories seldom break is labeled as without the prior.
+    assert label_take(s.take, layout).info["break_rate"] < knee
+    assert (label_take(s.take, layout).per_sample() ==
+            label_take(s.take, layout, LabelSettings(occlusion_prior=(0.0, 0.0))).per_sample()).all()
 
 
 def test_label_take_uses_the_shipped_vote_settings_unless_given_them():

@@ -40,6 +40,9 @@ class LabelSettings:
         null_prior, switch_cost, partner, continuity: the vote's fitted settings, nats
             ``(a, b)`` each (see :func:`.temporal.voting.vote`); None: the shipped fit for this
             method and layout.
+        occlusion_prior: ``(knee, slope)``: where the take's trajectories break more often than
+            ``knee`` times a second (:func:`.tracklets.break_rate`), every sample's null weight
+            falls by ``slope`` nats per break a second above it; None: the shipped fit.
         hand_count: ``"auto"`` finds how many hands of the layout the take holds; 1 or 2 force it.
         sides: the side of each hand found, in the order hands are found; None decides them from
             the markers' handedness.
@@ -68,6 +71,7 @@ class LabelSettings:
     switch_cost: tuple[float, float] | None = None
     partner: tuple[float, float] | None = None
     continuity: tuple[float, float] | None = None
+    occlusion_prior: tuple[float, float] | None = None
     hand_count: str | int = "auto"
     sides: tuple[str, ...] | None = None
     naming: str | None = None
@@ -80,7 +84,7 @@ class LabelSettings:
         # Sequences are stored as tuples so that settings compare (and hash) by value.
         if self.sides is not None and not isinstance(self.sides, tuple):
             object.__setattr__(self, "sides", tuple(self.sides))
-        for name in ("null_prior", "switch_cost", "partner", "continuity"):
+        for name in ("null_prior", "switch_cost", "partner", "continuity", "occlusion_prior"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, tuple):
                 object.__setattr__(self, name, tuple(float(v) for v in value))

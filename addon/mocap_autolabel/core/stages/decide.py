@@ -19,6 +19,7 @@ from ..temporal.confidence import (
     load_calibration,
     load_continuity,
     load_null_prior,
+    load_occlusion_prior,
     load_partner,
     load_switch_cost,
     segment_evidence,
@@ -27,6 +28,7 @@ from ..temporal.confidence import (
 from ..temporal.continuity import continuity_logp
 from ..temporal.partners import partner_logp, take_distances
 from ..temporal.voting import FIRST_LOOK_PAIRS, Samples, Segments, vote
+from ..tracklets import break_rate
 from .look import look_again
 from .run import LabelRun
 from .scoring import score_samples
@@ -112,7 +114,7 @@ class Vote(TemporalMode):
         s = run.settings
         fitted = run.info
         return vote(scored, run.segments, run.locked_at, s.vote_score, s.power_p, s.power_q, s.split_swaps,
-                    null_prior=tuple(fitted["null_prior"]), crossings=run.crossings,
+                    null_prior=null_prior(fitted), crossings=run.crossings,
                     switch_cost=tuple(fitted["switch_cost"]), exact_pairs=exact_pairs)
 
     def decide(self, run: LabelRun, scores: np.ndarray, samples: Samples, first: Labeling | None = None,
@@ -210,10 +212,22 @@ def fitted_settings(run: LabelRun) -> None:
     likelihood = s.vote_score == "likelihood"
     for key, given, load in (("null_prior", s.null_prior, load_null_prior), ("switch_cost", s.switch_cost,
                                                                              load_switch_cost),
-                             ("partner", s.partner, load_partner), ("continuity", s.continuity, load_continuity)):
+                             ("partner", s.partner, load_partner), ("continuity", s.continuity, load_continuity),
+                             ("occlusion_prior", s.occlusion_prior, load_occlusion_prior)):
         value = given if given is not None else \
             load(s.method, s.temporal, run.layout.name) if likelihood else (0.0, 0.0)
         run.info[key] = [float(v) for v in value]
+    run.info["break_rate"] = round(break_rate(take.valid, take.rate), 4)
+
+
+def null_prior(info: dict) -> tuple[float, float]:
+    """The vote's null prior ``(per tracklet, per sample)`` for the take of a run's ``info``: the
+    fitted one, its per-sample part lowered where the take's trajectories break often. Under heavy
+    occlusion the labeler sees fewer of the hand's markers and more ghosts in each frame, and gives
+    the markers it does see less probability; their short trajectories then lose to null."""
+    per_tracklet, per_sample = info["null_prior"]
+    knee, slope = info["occlusion_prior"]
+    return per_tracklet, per_sample - slope * max(0.0, info["break_rate"] - knee)
 
 
 def calibrate_confidence(run: LabelRun, labeling: Labeling, samples: Samples) -> Labeling:
@@ -224,15 +238,17 @@ def calibrate_confidence(run: LabelRun, labeling: Labeling, samples: Samples) ->
     labeling.evidence = segment_evidence(labeling, samples)
     labeling.confidence = labeling.evidence[:, 0].copy()  # the mean probability, until calibrated
     calibration = load_calibration(s.method, s.temporal, run.layout.name) if s.calibrate_confidence else None
+    run.info["confidence"] = "raw (no calibration for this method)"
     if calibration is not None:
         labeling.confidence = calibration(labeling.evidence, labeled=labeling.label >= 0)
+        run.info["confidence"] = "calibrated"
     elif s.calibrate_confidence and not run.method.sure_of_itself:
         # gmm or nearest on a layout nobody calibrated them for: their probabilities were never
         # measured against the truth there, and a high one is no promise, so none is sure.
         labeling.confidence = np.minimum(labeling.confidence, SURE - 1e-3)
         run.info["never_confident"] = "uncalibrated"
+        run.info["confidence"] = "capped below sure (no calibration for this layout)"
     labeling.confidence[labeling.locked] = 1.0
-    run.info["confidence"] = "calibrated" if calibration is not None else "raw (no calibration for this method)"
     if calibration is not None and calibration.never_sure:
         run.info["never_confident"] = True  # front ends say why every segment is uncertain
     return labeling

@@ -335,6 +335,13 @@ def load_partner(method: str, temporal: str, layout: str, path: str = CALIBRATIO
     return _fitted_pair(method, temporal, layout, path, "partner")
 
 
+def load_occlusion_prior(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> tuple[float, float]:
+    """The shipped occlusion prior ``(knee in breaks a second, nats per sample per break a second
+    above it)`` of a method, temporal mode and layout (see :func:`..stages.decide.null_prior`);
+    none where none was fitted."""
+    return _fitted_pair(method, temporal, layout, path, "occlusion_prior")
+
+
 def load_continuity(method: str, temporal: str, layout: str, path: str = CALIBRATIONS) -> tuple[float, float]:
     """The shipped continuity evidence ``(inside, outside)`` nats per sample of a method, temporal
     mode and layout (see :mod:`.continuity`); none where none was fitted."""
