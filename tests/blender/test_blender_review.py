@@ -435,6 +435,11 @@ def test_label_needs_a_take(empty_scene, bpy_module):
         bpy_module.ops.mocap_autolabel.label()
     with pytest.raises(RuntimeError, match="Label a take first"):
         bpy_module.ops.mocap_autolabel.resolve()
+    # Each operator on a labeled take says why it cannot run, not only that it cannot.
+    for op in (bpy_module.ops.mocap_autolabel.export_labeled, bpy_module.ops.mocap_autolabel.jump_to_segment,
+               bpy_module.ops.mocap_autolabel.jump_to_worst, bpy_module.ops.mocap_autolabel.next_uncertain):
+        with pytest.raises(RuntimeError, match="Label a take first"):
+            op()
 
 
 def test_export_labeled_c3d_and_overlay(labeled, tmp_path):

@@ -69,6 +69,13 @@ def _present(cls, found, message: str) -> bool:
     return True
 
 
+def _labeled_take_present(cls, context) -> bool:
+    """A poll for operators that work on a labeled take: whether the panel's take is one, with a
+    message that says what to do where it is not."""
+    return _present(cls, reviewed_panel_take(context),
+                    _not_a_take(context) or "Label a take first (Mocap sidebar tab > Label)")
+
+
 def _not_a_take(context) -> str | None:
     """Why the panel's Take field cannot be worked on (it holds a collection that is not a take)."""
     take = context.scene.mocap_autolabel.take

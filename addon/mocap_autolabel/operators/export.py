@@ -9,7 +9,7 @@ import bpy
 from bpy.props import EnumProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from .common import _present, beside_source, panel_take, reviewed_panel_take
+from .common import _labeled_take_present, _present, beside_source, panel_take, reviewed_panel_take
 
 
 class MOCAPAL_OT_export_labeled(bpy.types.Operator, ExportHelper):
@@ -25,7 +25,7 @@ class MOCAPAL_OT_export_labeled(bpy.types.Operator, ExportHelper):
 
     @classmethod
     def poll(cls, context):
-        return reviewed_panel_take(context) is not None
+        return _labeled_take_present(cls, context)
 
     def invoke(self, context, event):
         coll = reviewed_panel_take(context)

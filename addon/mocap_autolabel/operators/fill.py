@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import EnumProperty, FloatProperty
 
-from .common import _not_a_take, _present, reviewed_panel_take
+from .common import _labeled_take_present, reviewed_panel_take
 from .modal import JobModal, in_background, start_modal
 
 _METHODS = [
@@ -34,8 +34,7 @@ class _FillOperator:
 
     @classmethod
     def poll(cls, context):
-        why = _not_a_take(context) or "Label a take first (Mocap sidebar tab > Label)"
-        return _present(cls, reviewed_panel_take(context), why)
+        return _labeled_take_present(cls, context)
 
 
 class MOCAPAL_OT_fill_gaps(JobModal, _FillOperator, bpy.types.Operator):

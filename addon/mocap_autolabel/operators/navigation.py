@@ -8,7 +8,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, IntProperty
 
-from .common import _not_a_take, _present, _select_only, reviewed_panel_take
+from .common import _labeled_take_present, _select_only, reviewed_panel_take
 
 
 class MOCAPAL_OT_next_uncertain(bpy.types.Operator):
@@ -24,7 +24,7 @@ class MOCAPAL_OT_next_uncertain(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return _present(cls, reviewed_panel_take(context), _not_a_take(context) or "Label a take first")
+        return _labeled_take_present(cls, context)
 
     def execute(self, context):
         from ..blender.lists import queue_filters
@@ -80,7 +80,7 @@ class MOCAPAL_OT_jump_to_segment(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return reviewed_panel_take(context) is not None
+        return _labeled_take_present(cls, context)
 
     def execute(self, context):
         import numpy as np

@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import IntProperty
 
-from .common import reviewed_panel_take
+from .common import _labeled_take_present, reviewed_panel_take
 
 
 class MOCAPAL_OT_jump_to_worst(bpy.types.Operator):
@@ -20,7 +20,7 @@ class MOCAPAL_OT_jump_to_worst(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return reviewed_panel_take(context) is not None
+        return _labeled_take_present(cls, context)
 
     def execute(self, context):
         import numpy as np
