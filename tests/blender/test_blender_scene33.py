@@ -314,6 +314,31 @@ def test_bad_frames_are_marked_on_the_timeline_and_jump_to_worst_goes_there(empt
     assert len([m for m in scene.timeline_markers if m.name.startswith("?syn:")]) == len(ours)
 
 
+def test_the_markers_of_a_take_no_longer_in_the_scene_go_with_it(empty_scene, bpy_module, take_file, tmp_path):
+    import shutil
+
+    bpy = bpy_module
+    scene = empty_scene
+    scene.timeline_markers.new("mine", frame=5)
+    scene.timeline_markers.new("?mine: not a take's", frame=6)  # the user's, though it starts with '?'
+    first = _import_and_label(bpy, scene, take_file)
+    _import_and_label(bpy, scene, shutil.copy(take_file, tmp_path / "other.c3d"))
+    assert any(m.name.startswith("?syn:") for m in scene.timeline_markers)
+    scene.collection.children.unlink(first)  # the reviewer deletes the first take
+    assert bpy.ops.mocap_autolabel.resolve() == {"FINISHED"}  # an edit of the other one
+    names = [m.name for m in scene.timeline_markers]
+    assert not any(n.startswith("?syn:") for n in names) and any(n.startswith("?other:") for n in names)
+    assert "mine" in names and "?mine: not a take's" in names
+    # Markers left by a take deleted before the file was saved go when it is opened again.
+    scene.timeline_markers.new("?gone: 3 uncertain, 1 missing", frame=7)
+    path = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    names = [m.name for m in bpy.context.scene.timeline_markers]
+    assert "?gone: 3 uncertain, 1 missing" not in names and any(n.startswith("?other:") for n in names)
+    assert "mine" in names
+
+
 def test_the_label_panel_has_an_import_button(empty_scene, bpy_module):
     """The Mocap tab's Label panel draws the Import operator first (checked on the panel's source: a
     headless Blender draws no panels)."""

@@ -290,12 +290,15 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
 
 @bpy.app.handlers.persistent
 def on_load(*_args) -> None:
-    """After a file loads: drop the session caches, and give every scene without a reviewed take the
-    first labeled take it holds (a .blend written by the command line has none set)."""
+    """After a file loads: drop the session caches and the bad-frame markers of takes deleted before
+    it was saved, and give every scene without a reviewed take the first labeled take it holds (a
+    .blend written by the command line has none set)."""
     from .session import forget_all
+    from .timeline import clear_orphaned_markers
 
     forget_all()
     for scene in bpy.data.scenes:
+        clear_orphaned_markers(scene)
         settings = getattr(scene, "mocap_autolabel", None)
         if settings is None or settings.take is not None:
             continue

@@ -10,6 +10,8 @@ replaced whenever its labels change and never touch markers of the user or of an
 
 from __future__ import annotations
 
+import re
+
 import bpy
 
 from ..core.review import BadRun, bad_runs
@@ -38,11 +40,27 @@ def clear_bad_frames(scene: bpy.types.Scene, take_coll: bpy.types.Collection) ->
         scene.timeline_markers.remove(marker)
 
 
+#: A marker :func:`marker_name` wrote: the take's name, then what the run holds.
+_OURS = re.compile(rf"^{re.escape(MARKER_PREFIX)}(.+): (\d+ uncertain(, \d+ missing)?|\d+ missing)$")
+
+
+def clear_orphaned_markers(scene: bpy.types.Scene) -> int:
+    """Remove the markers of takes that are no longer in ``scene`` (a take deleted since it was
+    labeled); returns how many. A user's own markers never match :data:`_OURS`."""
+    present = {c.name for c in scene.collection.children_recursive}
+    orphans = [m for m in scene.timeline_markers
+               if (found := _OURS.match(m.name)) is not None and found.group(1) not in present]
+    for marker in orphans:
+        scene.timeline_markers.remove(marker)
+    return len(orphans)
+
+
 def mark_bad_frames(scene: bpy.types.Scene, take_coll: bpy.types.Collection, labeling, sure: float,
                     limit: int = MARKER_LIMIT, **filters) -> list[BadRun]:
     """Replace the take's timeline markers by one per worst run (at most ``limit``); returns the runs.
     ``filters``: the review queue's (``labeled_only``, ``min_frames``; see ``core.review.review_queue``)."""
     clear_bad_frames(scene, take_coll)
+    clear_orphaned_markers(scene)
     runs = bad_runs(labeling, sure, limit, **filters)
     first = first_frame(take_coll)
     for run in runs:
