@@ -95,6 +95,19 @@ def test_the_truth_line_scores_by_label_name_and_not_a_one_hand_labeling_of_two_
     assert json.loads(report.read_text())["truth"]["accuracy"] > 0.95
 
 
+def test_label_notes_heavy_occlusion_where_the_occlusion_prior_acted(capsys, tmp_path):
+    from mocap_autolabel.core.synth.generate import TakeCorruption, corrupt_take
+
+    s = synthesize(load_layout("han19"), 600, seed=7)
+    heavy = TakeCorruption(gaps_per_minute=138, mean_gap_s=0.125, persistent_ghosts=3, noise_sd=0.001)
+    take, _, _ = corrupt_take(s.markers, s.take.rate, seed=7, cfg=heavy)
+    for name, raw in (("heavy", take), ("plain", s.take)):
+        write_c3d(raw, tmp_path / f"{name}.c3d")
+        assert main(["label", str(tmp_path / f"{name}.c3d")]) == 0
+        text = capsys.readouterr().out
+        assert ("note     heavy occlusion: the take's trajectories break" in text) == (name == "heavy")
+
+
 def test_label_with_the_wrong_layout_warns_or_refuses_and_names_the_right_one(capsys, tmp_path):
     take = tmp_path / "glove.c3d"  # a glove13 take labeled with han19: a hand, but the wrong layout
     write_c3d(synthesize(load_layout("glove13"), 300, seed=4).take, take)  # half a han19 hand in most frames

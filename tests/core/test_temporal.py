@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 from conftest import ROOT, data_path
-from mocap_autolabel.core.checks import work_limit_warning
+from mocap_autolabel.core.checks import occlusion_note, work_limit_warning
 from mocap_autolabel.core.errors import MocapInputError
 from mocap_autolabel.core.labeling import EMPTY, NULL, Constraint, labeled_take, segments_from_runs
 from mocap_autolabel.core.layout import load_layout
@@ -272,8 +272,11 @@ def test_the_occlusion_prior_keeps_more_markers_under_heavy_occlusion_and_leaves
 
     (null_with, right_with), (null_without, right_without) = counts(shipped), counts(without)
     assert null_with < null_without and right_with > right_without
+    assert occlusion_note(shipped).startswith("heavy occlusion: the take's trajectories break")
+    assert occlusion_note(without) is None  # the prior did not act
     # A take whose trajectories seldom break is labeled as without the prior.
     assert label_take(s.take, layout).info["break_rate"] < knee
+    assert occlusion_note(label_take(s.take, layout)) is None
     assert (label_take(s.take, layout).per_sample() ==
             label_take(s.take, layout, LabelSettings(occlusion_prior=(0.0, 0.0))).per_sample()).all()
 

@@ -29,7 +29,7 @@ def _label(args) -> int:
     from ..core.labelers import labeler_method
     from ..core.labeling import unlabeled_point_names
     from ..core.layout import load_layout
-    from ..core.process import Outputs, performer_inputs, process_take, work_limit_warning
+    from ..core.process import Outputs, occlusion_note, performer_inputs, process_take, work_limit_warning
     from ..core.quiet import silenced_stdout
     from ..core.synth.truth import load_truth, truth_labels, truth_path
     from ..core.take import read_take
@@ -123,6 +123,9 @@ def _label(args) -> int:
     hurried = work_limit_warning(labeling)
     if hurried:
         print(f"  warning  {hurried}")
+    occluded = occlusion_note(labeling)
+    if occluded:
+        print(f"  note     {occluded}")
     tpath = truth_path(args.file)
     if os.path.isfile(tpath):
         from ..core.metrics import score_labeling

@@ -181,3 +181,16 @@ def work_limit_warning(labeling: Labeling) -> str | None:
     return (f"the vote's exclusive assignment reached its bound of {MILP_NODES} search nodes {stopped} time(s): "
             f"the labels are the best found within it, never worse than a greedy labeling (takes of hands need "
             f"one node; is this a hand?)")
+
+
+def occlusion_note(labeling: Labeling) -> str | None:
+    """One line where the vote's occlusion prior acted (the take's trajectories break more often
+    than its knee: heavy occlusion), else None."""
+    knee, slope = labeling.info.get("occlusion_prior", (0.0, 0.0))
+    rate = labeling.info.get("break_rate", 0.0)
+    if slope <= 0 or rate <= knee:
+        return None
+    return (f"heavy occlusion: the take's trajectories break {rate:.2f} times a second (above {knee:g}; takes with "
+            f"few occlusions: about 0.25), so short ones kept their labels on less evidence: review its uncertain "
+            f"segments")
+

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .cache import RunCache
-from .checks import HandCheck, LayoutDoubt, check_hand, hand_checks, work_limit_warning
+from .checks import HandCheck, LayoutDoubt, check_hand, hand_checks, occlusion_note, work_limit_warning
 from .errors import MocapInputError
 from .hands import HandNaming
 from .labelers import Labeler, labeler_method
@@ -37,7 +37,8 @@ if TYPE_CHECKING:  # the solve and the fill are imported where they run: labelin
 
 #: What the front ends (CLI, batch, Blender) use of the core's labeling and solving.
 __all__ = ["TEMPORAL_MODES", "LayoutDoubt", "Outputs", "TakeResult", "choose_layout", "layout_doubt",
-           "layout_from_names", "performer_inputs", "process_take", "work_limit_warning"]
+           "layout_from_names", "occlusion_note", "performer_inputs", "process_take",
+           "work_limit_warning"]
 
 #: The share of a labeling's work before its layout check (the check labels a short excerpt per layout).
 LABEL_SHARE = 0.95
@@ -323,7 +324,7 @@ def process_take(take: Take, layout: Layout, settings: LabelSettings, outputs: O
                 labeling, checks = other
                 labeled, facts = labeled_take(take, labeling), labeling.info["hands"]
             warnings += [f"{side} hand: {check}" for side, check in checks if not check.found]
-        warnings += [str(w) for w in (doubt, work_limit_warning(labeling)) if w]
+        warnings += [str(w) for w in (doubt, work_limit_warning(labeling), occlusion_note(labeling)) if w]
         if facts.get("forced") == 2:
             warnings.append("two hands were forced, one was found")
         if facts.get("warning"):

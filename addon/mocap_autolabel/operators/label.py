@@ -121,11 +121,14 @@ class MOCAPAL_OT_label(JobModal, bpy.types.Operator):
             self.report({"WARNING"}, f"{request.take_name}: {s['hands_warning']}")
         if s["layout_doubt"]:
             self.report({"WARNING"}, f"{request.take_name}: {s['layout_doubt']}")
-        from ..core.process import work_limit_warning
+        from ..core.process import occlusion_note, work_limit_warning
 
         hurried = work_limit_warning(labeling)  # as the CLI and batch warn
         if hurried:
             self.report({"WARNING"}, f"{request.take_name}: {hurried}")
+        occluded = occlusion_note(labeling)
+        if occluded:
+            self.report({"INFO"}, f"{request.take_name}: {occluded}")
         return {"FINISHED"}
 
     @staticmethod
