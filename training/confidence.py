@@ -8,9 +8,10 @@ conservative map of ``core/temporal/confidence.py``. For the default pipeline
 null prior and rigid-partner evidence together (:func:`fit_prior_and_partner`), then its
 continuity evidence (:func:`fit_continuity`), in turn until the switch cost is stable
 (:func:`fit_vote_settings`; ``--fit continuity`` fits only the continuity evidence, at the shipped
-rest, in minutes rather than an hour), and calibrates the decisions made with them. ``gmm`` is fitted on
-the first :data:`FIT_FRAMES` true frames of each take and ``nearest`` starts from the true first
-frame; only the frames after those are labeled. Writes
+rest, in minutes rather than an hour; ``--fit occlusion`` only the occlusion prior, on the takes
+also at heavier occlusions, :func:`fit_occlusion_prior`), and calibrates the decisions made with
+them. ``gmm`` is fitted on the first :data:`FIT_FRAMES` true frames of each take and ``nearest``
+starts from the true first frame; only the frames after those are labeled. Writes
 ``addon/mocap_autolabel/models/confidence.json``. Needs no PyTorch; rerun after retraining a model.
 """
 
