@@ -254,7 +254,7 @@ def test_break_rate_counts_trajectory_ends_before_the_last_frame_per_second_trac
     assert break_rate(np.zeros((10, 2), dtype=bool), 120.0) == 0.0
 
 
-def test_the_occlusion_prior_keeps_more_markers_under_heavy_occlusion_and_leaves_other_takes_alone():
+def test_the_occlusion_prior_keeps_more_markers_under_heavy_occlusion_and_leaves_other_takes_alone(monkeypatch):
     layout = load_layout("han19")
     knee, slope = load_occlusion_prior("set", "vote", "han19")
     assert knee > 0.0 and slope > 0.0  # fitted by training.confidence --fit occlusion
@@ -274,6 +274,19 @@ def test_the_occlusion_prior_keeps_more_markers_under_heavy_occlusion_and_leaves
     assert null_with < null_without and right_with > right_without
     assert occlusion_note(shipped).startswith("heavy occlusion: the take's trajectories break")
     assert occlusion_note(without) is None  # the prior did not act
+    # Another layout is tried on the evidence alone: on its markers the label bonus makes nearly
+    # every label worth a segment, and the vote's programme grows by an order of magnitude.
+    import mocap_autolabel.core.process as process
+
+    tried = []
+
+    def spy(take, layout, settings, **kw):
+        tried.append((layout.name, settings.occlusion_prior))
+        return label_take(take, layout, settings, **kw)
+
+    monkeypatch.setattr(process, "label_take", spy)
+    process.layout_doubt(take, layout, shipped)
+    assert ("glove13", (0.0, 0.0)) in tried
     # A take whose trajectories seldom break is labeled as without the prior.
     assert label_take(s.take, layout).info["break_rate"] < knee
     assert occlusion_note(label_take(s.take, layout)) is None

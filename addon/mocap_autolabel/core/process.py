@@ -146,6 +146,10 @@ def choose_layout(take: Take, requested: str | None) -> str:
 FEWER_POINTS = 1.5
 
 
+#: The settings another layout is tried with (:func:`layout_doubt`).
+NO_OCCLUSION_PRIOR = LabelSettings(occlusion_prior=(0.0, 0.0))
+
+
 def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: float = 0.95,
                  cache: RunCache | None = None) -> LayoutDoubt | None:
     """A :class:`.checks.LayoutDoubt` when another built-in layout fits ``take`` clearly better, else None.
@@ -168,7 +172,10 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
         if (name != layout.name and os.path.isfile(shipped_model("set", name))
                 and len(load_layout(name)) <= most):
             try:
-                other = label_take(excerpt, load_layout(name), cache=cache)
+                # Without the occlusion prior: on another layout's markers a heavily occluded take's
+                # label bonus makes nearly every label worth a segment, and the vote's programme
+                # grows by an order of magnitude; which layout fits is asked of the evidence alone.
+                other = label_take(excerpt, load_layout(name), NO_OCCLUSION_PRIOR, cache=cache)
             except MocapInputError:  # e.g. no samples in the excerpt
                 continue
             shares[name] = other.summary(confident)["confident_share"]
