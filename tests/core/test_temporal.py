@@ -288,9 +288,9 @@ def test_the_occlusion_prior_keeps_more_markers_under_heavy_occlusion_and_leaves
     process.layout_doubt(take, layout, shipped)
     assert ("glove13", (0.0, 0.0)) in tried
     # A take whose trajectories seldom break is labeled as without the prior.
-    assert label_take(s.take, layout).info["break_rate"] < knee
-    assert occlusion_note(label_take(s.take, layout)) is None
-    assert (label_take(s.take, layout).per_sample() ==
+    plain = label_take(s.take, layout)
+    assert plain.info["break_rate"] < knee and occlusion_note(plain) is None
+    assert (plain.per_sample() ==
             label_take(s.take, layout, LabelSettings(occlusion_prior=(0.0, 0.0))).per_sample()).all()
 
 
