@@ -48,7 +48,7 @@ from mocap_autolabel.core.temporal.voting import (
     tracklet_share,
     vote,
 )
-from mocap_autolabel.core.tracklets import break_rate, find_crossings
+from mocap_autolabel.core.tracklets import Tracklets, break_rate, find_crossings, mask_runs
 
 
 def _segments(starts, stops, slots=None) -> Segments:
@@ -249,9 +249,10 @@ def test_break_rate_counts_trajectory_ends_before_the_last_frame_per_second_trac
     valid[:100, 1] = valid[130:, 1] = True  # one break
     valid[50:52, 2] = True  # a two-frame flicker is no trajectory
     # 240 + 100 + 110 frames tracked at 120 Hz: 3.75 s, one end before the last frame.
-    assert break_rate(valid, 120.0) == pytest.approx(1 / 3.75)
-    assert break_rate(valid, 60.0) == pytest.approx(1 / 7.5)
-    assert break_rate(np.zeros((10, 2), dtype=bool), 120.0) == 0.0
+    tracklets = Tracklets(*mask_runs(valid))
+    assert break_rate(tracklets, 240, 120.0) == pytest.approx(1 / 3.75)
+    assert break_rate(tracklets, 240, 60.0) == pytest.approx(1 / 7.5)
+    assert break_rate(Tracklets(*mask_runs(np.zeros((10, 2), dtype=bool))), 10, 120.0) == 0.0
 
 
 def test_the_occlusion_prior_keeps_more_markers_under_heavy_occlusion_and_leaves_other_takes_alone(monkeypatch):

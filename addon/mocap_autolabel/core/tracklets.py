@@ -88,22 +88,23 @@ def find_tracklets(take: Take, max_speed: float | None = None) -> Tracklets:
 TRACKED_S = 0.1
 
 
-def break_rate(valid: np.ndarray, rate: float) -> float:
+def break_rate(tracklets: Tracklets, n_frames: int, rate: float) -> float:
     """How often the take's trajectories break: ends of trajectories of at least
     :data:`TRACKED_S` seconds before the take's last frame, per second of such trajectories
     (hand takes with a few short occlusions a marker-minute: about 0.25; a quarter of the samples
     missing in gaps of about 15 frames at 120 Hz: about 1.6).
 
     Args:
-        valid: bool ``(F, P)``: the take's samples.
+        tracklets: the take's runs between gaps (:func:`find_tracklets`).
+        n_frames: the take's frames.
         rate: frames per second.
     """
-    slot, start, stop = mask_runs(valid)
-    tracked = (stop - start) >= max(1, int(round(TRACKED_S * rate)))
-    seconds = (stop - start)[tracked].sum() / rate
+    length = tracklets.length
+    tracked = length >= max(1, int(round(TRACKED_S * rate)))
+    seconds = length[tracked].sum() / rate
     if seconds <= 0:
         return 0.0
-    return float(((stop < valid.shape[0]) & tracked).sum() / seconds)
+    return float(((tracklets.stop < n_frames) & tracked).sum() / seconds)
 
 
 def find_crossings(take: Take, near: float = 0.03, gain: float = 0.003, max_points: int = 64) -> dict[int, list[int]]:

@@ -217,7 +217,7 @@ def fitted_settings(run: LabelRun) -> None:
         value = given if given is not None else \
             load(s.method, s.temporal, run.layout.name) if likelihood else (0.0, 0.0)
         run.info[key] = [float(v) for v in value]
-    run.info["break_rate"] = round(break_rate(take.valid, take.rate), 4)
+    run.info["break_rate"] = round(break_rate(run.tracklets, take.n_frames, take.rate), 4)  # the scoring's
 
 
 def null_prior(info: dict) -> tuple[float, float]:
