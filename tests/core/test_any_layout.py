@@ -223,3 +223,29 @@ def test_gmm_on_a_layout_without_a_calibration_rates_no_segment_confident(tmp_pa
     out = capsys.readouterr().out
     assert "nearest has no confidence calibration for tips5_hand3" in out
     assert "0.0 % of labeled samples confident" in out
+
+
+def test_a_few_other_markers_beside_a_sparse_hand_are_no_second_hand():
+    # Three unlabeled markers half a metre from a hand (a body's, a prop's) hold as many points as a
+    # sparse layout's hand and were taken for a second hand: the real glove recording reduced to
+    # tips + three hand markers came out as two hands, the glove's labels on the "right" one.
+    from dataclasses import replace
+
+    layout = load_layout("tips5_hand3")
+    synth = synthesize(layout, 300, seed=4)
+    take = synth.take
+    rng = np.random.default_rng(0)
+    centre = np.nanmean(take.positions, axis=(0, 1)) + np.array([0.5, 0.0, 0.0])
+    drift = np.cumsum(rng.normal(0.0, 0.0005, (take.n_frames, 1, 3)), axis=0)
+    others = centre + np.array([[0.0, 0.0, 0.0], [0.06, 0.01, 0.0], [0.02, 0.07, 0.01]]) + drift
+    take = replace(take, positions=np.concatenate([take.positions, others], axis=1),
+                   names=list(take.names) + [f"*{take.n_points + i}" for i in range(3)], residuals=None, filled=None)
+    labeling = label_take(take, layout)
+    facts = labeling.info["hands"]
+    assert facts["count"] == 1 and len(facts["two_hands_rejected"]["no_hand_in"]) == 1
+    assert "two groups of points found, and no hand in the" in facts["warning"]
+    per = labeling.per_sample()
+    truth = np.concatenate([synth.labels, np.full((take.n_frames, 3), -1)], axis=1)
+    ok = take.valid & (truth >= 0)
+    assert (per[ok] == truth[ok]).mean() > 0.9
+    assert (per[:, -3:] < 0).all()  # the other markers stay null

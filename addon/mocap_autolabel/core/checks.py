@@ -110,9 +110,16 @@ def _hand_frames(markers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per frame of ``markers`` ``(F, M, 3)`` (NaN = none): how many, and whether half of the M
     are there, all within :data:`HAND_REACH` of their median."""
     count = np.isfinite(markers[..., 0]).sum(axis=1)
+    # np.nanmedian's exact value, from one sort (NaN sorts last): numpy's own takes a masked-array
+    # path over so short an axis, several times slower on long takes.
+    ordered = np.sort(markers, axis=1)
+    n = np.isfinite(markers).sum(axis=1, keepdims=True)  # (F, 1, 3)
+    last = markers.shape[1] - 1
+    low = np.take_along_axis(ordered, np.clip((n - 1) // 2, 0, last), axis=1)
+    high = np.take_along_axis(ordered, np.clip(n // 2, 0, last), axis=1)
+    centre = np.where(n > 0, (low + high) / 2, np.nan)
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # frames with no labeled marker
-        centre = np.nanmedian(markers, axis=1, keepdims=True)
         reach = np.nanmax(np.linalg.norm(markers - centre, axis=2), axis=1)
     return count, (count >= markers.shape[1] / 2) & (reach <= HAND_REACH)
 

@@ -97,13 +97,13 @@ def one_hand_stage(run: LabelRun) -> Retry | None:
     settings = run.settings
     if not (run.found.count == 2 and str(settings.hand_count) == "auto" and not run.constraints):
         return None
+    single = Attempt(settings.but(hand_count=1, sides=None, validate=False),
+                     run.corrections.but(constraints=(), hand_swaps=None), run.labeler)
     if hands_apart(run.found):
-        return None
+        return _no_hand_among_two(run, single)
     two = run.labeling.summary()["confident_share"]
     if two >= DOUBTFUL_SHARE:
         return None
-    single = Attempt(settings.but(hand_count=1, sides=None, validate=False),
-                     run.corrections.but(constraints=(), hand_swaps=None), run.labeler)
 
     def better(one_hand: Labeling) -> Labeling | None:
         one = one_hand.summary()["confident_share"]
@@ -111,6 +111,31 @@ def one_hand_stage(run: LabelRun) -> Retry | None:
             one_hand.info["hands"].update(two_hands_rejected={"two": round(two, 4), "one": round(one, 4)})
             return one_hand
         return None
+
+    return Retry("checking against one hand", single, better)
+
+
+def _no_hand_among_two(run: LabelRun, single: Attempt) -> Retry | None:
+    """Two groups apart, one of which the no-hand rule finds no hand in (:func:`..checks.hand_checks`):
+    a few other markers near one hand (a body's, a prop's) hold as many points as a sparse layout's
+    hand and were taken for a second hand. The take is labeled as one hand, which is kept where
+    the rule finds the hand in it."""
+    from ..checks import check_hand, hand_checks
+
+    checks = hand_checks(run.take, run.layout, run.labeling)
+    if all(check.found for _, check in checks) or not any(check.found for _, check in checks):
+        return None
+    not_found = [side for side, check in checks if not check.found]
+
+    def better(one_hand: Labeling) -> Labeling | None:
+        if not check_hand(run.take, run.layout, one_hand).found:
+            return None
+        facts = one_hand.info["hands"]
+        facts.update(two_hands_rejected={"no_hand_in": not_found})
+        facts["warning"] = "; ".join(filter(None, [facts.get("warning"), (
+            f"two groups of points found, and no hand in the {not_found[0]} one: labeled as one hand; "
+            f"if it holds two, use --hands 2")]))
+        return one_hand
 
     return Retry("checking against one hand", single, better)
 
