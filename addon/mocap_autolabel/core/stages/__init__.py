@@ -8,6 +8,7 @@
 4. ``refine``      (:mod:`.refine`): the hands' second look; hands that traded places; IK validation.
 5. ``name_sides``  (:mod:`.hands`): left and right, the labels' names.
 6. ``checks``      (:mod:`.refine`): two hands against one; rigid props.
+7. ``finger order`` (:mod:`.refine`): a sparse set's fingers over the whole take, by the template hand.
 
 A stage that needs another pass returns a :class:`.run.Retry` (what to change) to the pipeline's
 loop; no stage calls the pipeline.

@@ -169,3 +169,43 @@ def _props(take: Take, tracklets, labeling: Labeling, n_labels: int, cache) -> l
     positions = np.where(take.valid[..., None], take.positions, np.nan)
     groups = cache.remember("rigid_groups", cache.take_key(take), lambda: rigid_groups(positions, tracklets, take.rate))
     return find_props(positions, tracklets, take.rate, votes.argmax(axis=1) - 1, groups=groups)
+
+
+def finger_order_stage(run: LabelRun) -> None:
+    """The fingers' order over the whole take, checked by the template hand
+    (:mod:`..hand.finger_order`) for the layout-conditioned ``set`` model on a sparse set with a
+    hand cluster: a hand whose labels fit the hand clearly better in another order is relabeled,
+    and the segments moved stay below "sure" for the reviewer (``info["finger_order"]``)."""
+    from ..hand.finger_order import FINGERS, checked_order, finger_groups, label_map
+    from ..review import SURE
+    from .hands import hand_markers
+
+    groups = finger_groups(run.layout)
+    if groups is None or not getattr(run.labeler, "layout_conditioned", False):
+        return
+    t = time.perf_counter()
+    labeling, m = run.labeling, len(run.layout)
+    facts = labeling.info["hands"]
+    count = facts.get("count", 1)
+    sides = facts.get("sides") if count == 2 or facts.get("sides") else [None] * count
+    per = labeling.per_sample()
+    checked = []
+    for h, side in enumerate(sides):
+        order, found = checked_order(hand_markers(run.take, per, m, h), run.layout, groups, side)
+        if not found:
+            continue
+        mine = (labeling.label >= h * m) & (labeling.label < (h + 1) * m)
+        new = labeling.label.astype(np.int64)
+        new[mine] = h * m + label_map(groups, order, m)[new[mine] - h * m]
+        moved = new != labeling.label
+        labeling.label = new.astype(labeling.label.dtype)
+        labeling.confidence[moved] = np.minimum(labeling.confidence[moved], np.float32(SURE - 1e-3))
+        changed = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
+        checked.append({"hand": h, **found, "moved": changed, "segments": int(moved.sum())})
+        if changed:
+            where = f"the {side} hand's " if side and count == 2 else ""
+            facts["warning"] = "; ".join(filter(None, [facts.get("warning"), (
+                f"{where}finger order changed by the template hand's fit (" +
+                ", ".join(f"{a} -> {b}" for a, b in changed.items()) + "): check these fingers")]))
+    labeling.info["finger_order"] = checked
+    run.timed("finger_order", t)

@@ -1,0 +1,121 @@
+"""The fingers' order over a whole take, checked by the template hand.
+
+On sparse sets (five fingertips and a hand cluster) a labeler that sees one frame at a time gets
+whole trajectories wrong under one permutation of the fingers for the whole take (the thumb taken
+for the index, three fingers cycled); the vote then holds that order throughout. The average
+template hand, solved on a few well-seen frames under each candidate order of the fingers, fits the
+true order clearly better where the labeling's own order is wrong: the order whose median marker
+residual is :data:`MARGIN` of the labeling's own, or less, replaces it.
+
+Only layouts whose five fingers carry the same markers (one fingertip each, or a tip and a
+proximal marker each) and that have at least three markers on the hand's back or wrist are checked:
+without a hand frame, five tips alone fit several orders about equally well.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from ..layout import Layout, Marker
+from .calibrate import detect_side
+from .ik import HandSolver
+from .skeleton import HandModel
+
+#: The fingers, as the hand model's bone names begin.
+FINGERS = ("thumb", "index", "middle", "ring", "little")
+#: Well-seen frames the template hand is solved on (evenly spread over the take).
+FRAMES = 40
+#: Another order replaces the labeling's where its median residual is at most this share of the
+#: labeling's own (a labeling right already fits best, or within noise).
+MARGIN = 0.9
+#: Markers on the hand's back or wrist (bones ``palm`` and ``*_meta``) that make the hand frame.
+HAND_MARKERS = 3
+
+
+def _role(marker: Marker) -> str:
+    """A marker's place on its finger, comparable across the fingers (the thumb has no middle phalanx)."""
+    segment = marker.bone.split("_", 1)[1]
+    return "tip" if segment == "dist" and marker.along >= 0.5 else segment
+
+
+def finger_groups(layout: Layout) -> list[list[int]] | None:
+    """Each finger's markers (indices into ``layout``, in the same order of roles for every finger),
+    thumb first; None where the layout cannot be checked (see the module's docstring)."""
+    hand = sum(m.bone == "palm" or m.bone.endswith("_meta") for m in layout.markers)
+    groups, roles = [], None
+    for finger in FINGERS:
+        members = sorted((_role(m), i) for i, m in enumerate(layout.markers)
+                         if m.bone.startswith(finger + "_") and not m.bone.endswith("_meta"))
+        these = [r for r, _ in members]
+        if not members or "tip" not in these or (roles is not None and these != roles):
+            return None
+        roles = these
+        groups.append([i for _, i in members])
+    return groups if hand >= HAND_MARKERS else None
+
+
+def candidate_orders() -> list[tuple[int, ...]]:
+    """The orders tried, the labeling's own first: every swap of two fingers, and every cycle of
+    three that moves the thumb (the confusions seen on han2018's sparse sets). ``order[a]`` is the
+    finger that finger ``a``'s labels become."""
+    identity = tuple(range(len(FINGERS)))
+    out = [identity]
+    for a, b in itertools.combinations(identity, 2):
+        order = list(identity)
+        order[a], order[b] = b, a
+        out.append(tuple(order))
+    for a, b in itertools.permutations(identity[1:], 2):  # thumb -> a -> b -> thumb
+        order = list(identity)
+        order[0], order[a], order[b] = a, b, 0
+        out.append(tuple(order))
+    return out
+
+
+def label_map(groups: list[list[int]], order: tuple[int, ...], m: int) -> np.ndarray:
+    """int ``(M,)``: the label each label becomes under the finger ``order``."""
+    out = np.arange(m)
+    for a, b in enumerate(order):
+        out[groups[a]] = groups[b]
+    return out
+
+
+def _well_seen(observed: np.ndarray, frames: int) -> np.ndarray:
+    """Up to ``frames`` frame indices with the most labeled markers, spread over the take."""
+    seen = np.isfinite(observed[..., 0]).sum(axis=1)
+    best = np.flatnonzero(seen == seen.max())
+    if len(best) < frames // 2:
+        best = np.flatnonzero(seen >= max(4, seen.max() - 1))
+    return best[np.linspace(0, len(best) - 1, min(frames, len(best))).astype(int)]
+
+
+def checked_order(observed: np.ndarray, layout: Layout, groups: list[list[int]],
+                  side: str | None = None) -> tuple[tuple[int, ...], dict]:
+    """The finger order the template hand fits best for one hand's labeled markers ``observed``
+    ``(F, M, 3)`` (metres, NaN where unlabeled): the labeling's own unless another is clearly better
+    (:data:`MARGIN`); and the facts (side, median residuals in mm of the labeling's order and the
+    chosen one). ``side``: the hand's, where known (else the side the template fits better)."""
+    identity = tuple(range(len(groups)))
+    if np.isfinite(observed[..., 0]).sum(axis=1).max(initial=0) < 4:
+        return identity, {}
+    frames = _well_seen(observed, FRAMES)
+    try:
+        side = side or detect_side(observed, layout)
+    except ValueError:  # no frame the template can be solved on
+        return identity, {}
+    hand = HandModel(side=side)
+    solver = HandSolver(hand, layout.place(hand)[0])
+    orders = candidate_orders()
+    m = len(layout)
+    stack = np.empty((len(orders), len(frames), m, 3))
+    for i, order in enumerate(orders):
+        stack[i][:, label_map(groups, order, m)] = observed[frames]
+    stack = stack.reshape(-1, m, 3)
+    residuals = solver.evaluate(solver.cold_start(stack), stack).residuals.reshape(len(orders), -1)
+    with np.errstate(invalid="ignore"):
+        median = np.array([np.median(r[np.isfinite(r)]) if np.isfinite(r).any() else np.inf for r in residuals])
+    best = int(np.argmin(median))  # the first of equals: the labeling's own order wins ties
+    chosen = orders[best] if median[best] <= MARGIN * median[0] else identity
+    return chosen, {"side": side, "residual_mm": round(float(median[0]) * 1000, 2),
+                    "chosen_mm": round(float(median[orders.index(chosen)]) * 1000, 2)}

@@ -1,0 +1,70 @@
+"""The fingers' order over a whole take, checked by the template hand (core.hand.finger_order)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mocap_autolabel.core.hand.finger_order import candidate_orders, checked_order, finger_groups, label_map
+from mocap_autolabel.core.layout import load_layout
+from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.synth.generate import synthesize
+
+
+def _labeled(synth, m: int) -> np.ndarray:
+    """``(F, M, 3)`` the true labeled positions of a synthetic take (NaN where unseen)."""
+    out = np.full((synth.take.n_frames, m, 3), np.nan)
+    f, p = np.nonzero(synth.labels >= 0)
+    out[f, synth.labels[f, p]] = synth.take.positions[f, p]
+    return out
+
+
+def test_which_layouts_are_checked():
+    tips5 = finger_groups(load_layout("tips5_hand3"))
+    assert tips5 is not None and [len(g) for g in tips5] == [1] * 5
+    assert [len(g) for g in finger_groups(load_layout("tips10_hand3"))] == [2] * 5
+    assert finger_groups(load_layout("tips5")) is None  # no hand frame: five tips alone fit several orders
+    assert finger_groups(load_layout("tips3_hand3")) is None  # not every finger
+    assert finger_groups(load_layout("han19")) is None  # the thumb's markers are not the fingers'
+    orders = candidate_orders()
+    assert orders[0] == (0, 1, 2, 3, 4) and len(orders) == len(set(orders)) == 23
+    assert all(sorted(o) == [0, 1, 2, 3, 4] for o in orders)
+
+
+@pytest.mark.parametrize("order", [(1, 0, 2, 3, 4), (2, 1, 0, 3, 4), (1, 2, 0, 3, 4)])
+def test_a_wrong_finger_order_is_put_back_and_a_right_one_kept(order):
+    layout = load_layout("tips5_hand3")
+    groups, m = finger_groups(layout), len(layout)
+    synth = synthesize(layout, 300, seed=5)
+    right = _labeled(synth, m)
+    kept, facts = checked_order(right, layout, groups)
+    assert kept == (0, 1, 2, 3, 4) and facts["side"] in ("left", "right")
+    wrong = np.full_like(right, np.nan)
+    wrong[:, label_map(groups, order, m)] = right  # each finger's labels on another finger
+    back, facts = checked_order(wrong, layout, groups)
+    restored = np.full_like(wrong, np.nan)
+    restored[:, label_map(groups, back, m)] = wrong
+    assert np.array_equal(restored, right, equal_nan=True)
+    assert facts["chosen_mm"] <= 0.9 * facts["residual_mm"]
+
+
+def test_the_pipeline_keeps_a_right_labeling_and_puts_back_a_take_with_two_fingers_swapped():
+    from mocap_autolabel.core.review import SURE
+
+    layout = load_layout("tips5_hand3")
+    right = synthesize(layout, 300, seed=2)
+    labeling = label_take(right.take, layout)
+    [checked] = labeling.info["finger_order"]
+    assert checked["moved"] == {} and checked["segments"] == 0
+    # seed 4: set + vote label the middle and ring fingertips the other way round for the whole take
+    swapped = synthesize(layout, 300, seed=4)
+    labeling = label_take(swapped.take, layout)
+    [checked] = labeling.info["finger_order"]
+    assert checked["moved"] == {"middle": "ring", "ring": "middle"} and checked["segments"] > 0
+    per, ok = labeling.per_sample(), swapped.take.valid & (swapped.labels >= 0)
+    assert (per[ok] == swapped.labels[ok]).mean() > 0.95
+    moved = np.isin(labeling.label, [layout.names.index("MiddleTip"), layout.names.index("RingTip")])
+    assert (labeling.confidence[moved] < SURE).all()  # the reviewer checks what the fit moved
+    assert "finger order changed by the template hand's fit (middle -> ring, ring -> middle)" \
+        in labeling.info["hands"]["warning"]
+    assert "finger_order" not in label_take(synthesize(load_layout("tips3"), 100, seed=1).take,
+                                            load_layout("tips3")).info
