@@ -68,3 +68,19 @@ def test_the_pipeline_keeps_a_right_labeling_and_puts_back_a_take_with_two_finge
         in labeling.info["hands"]["warning"]
     assert "finger_order" not in label_take(synthesize(load_layout("tips3"), 100, seed=1).take,
                                             load_layout("tips3")).info
+
+
+def test_a_reviewers_lock_is_never_moved_by_the_check():
+    from mocap_autolabel.core.labeling import Constraint
+    from mocap_autolabel.core.settings import Corrections
+
+    layout = load_layout("tips5_hand3")
+    swapped = synthesize(layout, 300, seed=4)
+    # the reviewer locks a ring-tip sample as MiddleTip, the order the vote chose for this take
+    middle = layout.names.index("MiddleTip")
+    f, p = np.nonzero(swapped.labels == layout.names.index("RingTip"))
+    lock = Constraint(slot=int(p[0]), start=int(f[0]), stop=int(f[0]) + 1, label=middle)
+    labeling = label_take(swapped.take, layout, corrections=Corrections(constraints=(lock,)))
+    [checked] = labeling.info["finger_order"]
+    assert checked["moved"] == {} and checked["kept_for_locks"] == {"middle": "ring", "ring": "middle"}
+    assert labeling.per_sample()[lock.start, lock.slot] == middle

@@ -175,7 +175,8 @@ def finger_order_stage(run: LabelRun) -> None:
     """The fingers' order over the whole take, checked by the template hand
     (:mod:`..hand.finger_order`) for the layout-conditioned ``set`` model on a sparse set with a
     hand cluster: a hand whose labels fit the hand clearly better in another order is relabeled,
-    and the segments moved stay below "sure" for the reviewer (``info["finger_order"]``)."""
+    and the segments moved stay below "sure" for the reviewer (``info["finger_order"]``). A
+    reviewer's locked label is never moved: a hand whose new order would move one keeps its own."""
     from ..hand.finger_order import FINGERS, checked_order, finger_groups, label_map
     from ..review import SURE
     from .hands import hand_markers
@@ -198,6 +199,10 @@ def finger_order_stage(run: LabelRun) -> None:
         new = labeling.label.astype(np.int64)
         new[mine] = h * m + label_map(groups, order, m)[new[mine] - h * m]
         moved = new != labeling.label
+        if (moved & labeling.locked).any():  # a reviewer's label says this finger is right as it is
+            found["kept_for_locks"] = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
+            checked.append({"hand": h, **found, "moved": {}, "segments": 0})
+            continue
         labeling.label = new.astype(labeling.label.dtype)
         labeling.confidence[moved] = np.minimum(labeling.confidence[moved], np.float32(SURE - 1e-3))
         changed = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
