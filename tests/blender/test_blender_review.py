@@ -631,3 +631,24 @@ def test_the_panel_says_gmm_has_no_calibration_for_a_sparse_layout(empty_scene, 
     assert bpy.ops.mocap_autolabel.label(method="gmm") == {"FINISHED"}
     s = summary(load_state(settings.take).labeling, settings.sure)
     assert s["never_confident"] == "uncalibrated" and s["confident"] == 0.0
+
+
+def test_label_puts_back_a_sparse_takes_finger_order(empty_scene, bpy_module, tmp_path):
+    # Blender labels through a remembering labeler: the finger-order check must see the model behind it.
+    from mocap_autolabel.blender.review import load_state
+    from mocap_autolabel.core.layout import load_layout
+    from mocap_autolabel.core.synth.generate import save_synth, synthesize
+
+    bpy = bpy_module
+    layout = load_layout("tips5_hand3")
+    synth = synthesize(layout, 300, seed=4)  # set + vote swap the middle and ring tips for the whole take
+    path = tmp_path / "sparse.c3d"
+    save_synth(synth, str(path))
+    assert bpy.ops.mocap_autolabel.import_markers(filepath=str(path)) == {"FINISHED"}
+    settings = empty_scene.mocap_autolabel
+    settings.layout = "tips5_hand3"
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    labeling = load_state(settings.take).labeling
+    assert labeling.info["finger_order"][0]["moved"] == {"middle": "ring", "ring": "middle"}
+    ok = synth.take.valid & (synth.labels >= 0)
+    assert (labeling.per_sample()[ok] == synth.labels[ok]).mean() > 0.95

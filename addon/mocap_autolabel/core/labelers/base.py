@@ -103,6 +103,8 @@ class Labeler(ABC):
     #: The method's name as the CLI and the add-on select it.
     name: str = ""
     layout: Layout
+    #: One model for every layout (``set_any``), not one made for this layout.
+    layout_conditioned: bool = False
 
     @abstractmethod
     def scores(self, points: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -136,6 +138,7 @@ class RememberingLabeler(Labeler):
 
     def __init__(self, inner: Labeler, keep: int = 2) -> None:
         self.inner, self.layout, self.name = inner, inner.layout, inner.name
+        self.layout_conditioned = inner.layout_conditioned
         self.keep = keep
         self._remembered: list[tuple[tuple, np.ndarray]] = []  # (key, scores), the latest last
 

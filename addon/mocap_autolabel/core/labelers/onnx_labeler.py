@@ -77,7 +77,6 @@ class OnnxLabeler(Labeler):
         self.name = self.card["method"]
         names = list(self.card["layout"].get("labels", []))
         self.extra_feeds: dict[str, np.ndarray] = {}
-        #: One model for every layout (``set_any``), not one trained for this layout.
         self.layout_conditioned = bool(self.card["input"].get("layout_conditioned"))
         if self.layout_conditioned:
             if layout is None:
