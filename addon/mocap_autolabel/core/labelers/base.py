@@ -138,7 +138,7 @@ class RememberingLabeler(Labeler):
 
     def __init__(self, inner: Labeler, keep: int = 2) -> None:
         self.inner, self.layout, self.name = inner, inner.layout, inner.name
-        self.layout_conditioned = inner.layout_conditioned
+        self.layout_conditioned = getattr(inner, "layout_conditioned", False)  # a labeler may be duck-typed
         self.keep = keep
         self._remembered: list[tuple[tuple, np.ndarray]] = []  # (key, scores), the latest last
 

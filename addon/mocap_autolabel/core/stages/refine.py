@@ -182,7 +182,7 @@ def finger_order_stage(run: LabelRun) -> None:
     from .hands import hand_markers
 
     groups = finger_groups(run.layout)
-    if groups is None or not run.labeler.layout_conditioned:
+    if groups is None or not getattr(run.labeler, "layout_conditioned", False):  # duck-typed labelers too
         return
     t = time.perf_counter()
     labeling, m = run.labeling, len(run.layout)
