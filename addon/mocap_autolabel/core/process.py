@@ -19,7 +19,7 @@ import numpy as np
 from .cache import RunCache
 from .checks import HandCheck, LayoutDoubt, check_hand, hand_checks, occlusion_note, work_limit_warning
 from .errors import MocapInputError
-from .hands import HandNaming
+from .hands import HandNaming, add_warning
 from .labelers import Labeler, labeler_method
 from .labelers.onnx_labeler import shipped_model
 from .labeling import Labeling, labeled_take, layout_markers
@@ -253,8 +253,7 @@ def _two_hand_reading(take: Take, layout: Layout, settings: LabelSettings, outpu
     if not any(check.found for _, check in checks):
         return None
     if not forced:
-        two.info["hands"]["warning"] = "; ".join(filter(None, [two.info["hands"].get("warning"), (
-            "labeled as two hands: as one hand, no hand was found")]))
+        add_warning(two.info["hands"], "labeled as two hands: as one hand, no hand was found")
         return two, checks
     m = len(layout)
     best = max(range(2), key=lambda h: checks[h][1].share)
@@ -269,9 +268,8 @@ def _two_hand_reading(take: Take, layout: Layout, settings: LabelSettings, outpu
     if not check.found:
         return (f"two hands found; {one_hint} labels one of them, and finds no hand in the {side} one: "
                 f"{check.describe(outputs.layout_hint)} ({two_hint} labels both)")
-    one.info["hands"]["warning"] = "; ".join(filter(None, [one.info["hands"].get("warning"), (
-        f"two hands found; {one_hint} labels one of them, the {side} hand here (a hand in "
-        f"{100 * check.share:.0f} % of frames); {two_hint} labels both")]))
+    add_warning(one.info["hands"], f"two hands found; {one_hint} labels one of them, the {side} hand here (a hand "
+                                   f"in {100 * check.share:.0f} % of frames); {two_hint} labels both")
     return one, [("", check)]
 
 

@@ -76,11 +76,13 @@ from .tracking import (
     SWAP_MARGIN,
     SWAP_SECONDS,
     Hands,
+    add_warning,
     find_hands,
     replace_valid,
 )
 
 __all__ = [
+    "add_warning",
     "body_side",
     "body_side_evidence",
     "shape_tells_sides",

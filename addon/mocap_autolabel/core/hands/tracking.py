@@ -38,6 +38,11 @@ LOST_SECONDS = 0.25
 HANDS = ("auto", "1", "2")
 
 
+def add_warning(facts: dict, line: str) -> None:
+    """Append ``line`` to the hands' facts' ``"warning"`` (one line, its parts joined by "; ")."""
+    facts["warning"] = "; ".join(filter(None, [facts.get("warning"), line]))
+
+
 @dataclass
 class Hands:
     """Which hand each sample of a take belongs to.

@@ -18,6 +18,7 @@ from ..hands import (
     HandNaming,
     Hands,
     SideEvidence,
+    add_warning,
     body_side,
     body_side_evidence,
     decide_sides,
@@ -256,10 +257,10 @@ def name_sides_stage(run: LabelRun) -> None:
         evidence = body_evidence(take, layout, labeling, found.count)
         facts["sides_by"] = "body names" if any(e is not None for e in evidence) else "none"
         if sides is None and found.count == 2:
-            facts["warning"] = "; ".join(filter(None, [facts.get("warning"), (
-                f"layout '{layout.name}' has too few markers off one plane to tell a left hand from a right one "
-                "by shape; " + ("sides taken from the labeled body's L/R names" if facts["sides_by"] == "body names"
-                                else "no side-named body points either: check the sides (--sides)"))]))
+            add_warning(facts, f"layout '{layout.name}' has too few markers off one plane to tell a left hand from a "
+                               "right one by shape; " + (
+                                   "sides taken from the labeled body's L/R names" if facts["sides_by"] == "body names"
+                                   else "no side-named body points either: check the sides (--sides)"))
     side_list, side_facts = decide_sides(evidence, None if sides is None else list(sides))
     if swaps is not None and swaps.any():
         facts["swaps"] = swap_ranges(swaps)

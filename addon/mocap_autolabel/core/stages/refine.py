@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..hands import HAND_RADIUS, Hands, identity_swaps, swap_ranges
+from ..hands import HAND_RADIUS, Hands, add_warning, identity_swaps, swap_ranges
 from ..labeling import Labeling
 from ..props import Prop, find_props, prop_mask, rigid_groups
 from ..take import Take
@@ -130,11 +130,9 @@ def _no_hand_among_two(run: LabelRun, single: Attempt) -> Retry | None:
     def better(one_hand: Labeling) -> Labeling | None:
         if not check_hand(run.take, run.layout, one_hand).found:
             return None
-        facts = one_hand.info["hands"]
-        facts.update(two_hands_rejected={"no_hand_in": not_found})
-        facts["warning"] = "; ".join(filter(None, [facts.get("warning"), (
-            f"two groups of points found, and no hand in the {not_found[0]} one: labeled as one hand; "
-            f"if it holds two, use --hands 2")]))
+        one_hand.info["hands"].update(two_hands_rejected={"no_hand_in": not_found})
+        add_warning(one_hand.info["hands"], f"two groups of points found, and no hand in the {not_found[0]} one: "
+                                            f"labeled as one hand; if it holds two, use --hands 2")
         return one_hand
 
     return Retry("checking against one hand", single, better)
@@ -188,7 +186,7 @@ def finger_order_stage(run: LabelRun) -> None:
     labeling, m = run.labeling, len(run.layout)
     facts = labeling.info["hands"]
     count = facts.get("count", 1)
-    sides = facts.get("sides") if count == 2 or facts.get("sides") else [None] * count
+    sides = facts.get("sides") or [None] * count  # one hand without a naming has no side decided
     per = labeling.per_sample()
     checked = []
     for h, side in enumerate(sides):
@@ -199,18 +197,16 @@ def finger_order_stage(run: LabelRun) -> None:
         new = labeling.label.astype(np.int64)
         new[mine] = h * m + label_map(groups, order, m)[new[mine] - h * m]
         moved = new != labeling.label
+        changed = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
         if (moved & labeling.locked).any():  # a reviewer's label says this finger is right as it is
-            found["kept_for_locks"] = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
-            checked.append({"hand": h, **found, "moved": {}, "segments": 0})
+            checked.append({"hand": h, **found, "kept_for_locks": changed, "moved": {}, "segments": 0})
             continue
         labeling.label = new.astype(labeling.label.dtype)
         labeling.confidence[moved] = np.minimum(labeling.confidence[moved], np.float32(SURE - 1e-3))
-        changed = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
         checked.append({"hand": h, **found, "moved": changed, "segments": int(moved.sum())})
         if changed:
             where = f"the {side} hand's " if side and count == 2 else ""
-            facts["warning"] = "; ".join(filter(None, [facts.get("warning"), (
-                f"{where}finger order changed by the template hand's fit (" +
-                ", ".join(f"{a} -> {b}" for a, b in changed.items()) + "): check these fingers")]))
+            add_warning(facts, f"{where}finger order changed by the template hand's fit ("
+                               + ", ".join(f"{a} -> {b}" for a, b in changed.items()) + "): check these fingers")
     labeling.info["finger_order"] = checked
     run.timed("finger_order", t)
