@@ -76,9 +76,11 @@ from .tracking import (
     SWAP_MARGIN,
     SWAP_SECONDS,
     Hands,
+    HandTracks,
     add_warning,
     find_hands,
     replace_valid,
+    track_hands,
 )
 
 __all__ = [
@@ -94,6 +96,7 @@ __all__ = [
     "HANDS",
     "HAND_RADIUS",
     "HandNaming",
+    "HandTracks",
     "Hands",
     "LOST_SECONDS",
     "NAMINGS",
@@ -122,5 +125,6 @@ __all__ = [
     "split_hands",
     "swap_frames",
     "swap_ranges",
+    "track_hands",
     "traded_text",
 ]

@@ -4,13 +4,14 @@ other, and the count of hands (:func:`find_hands`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..layout import Layout
 from ..take import Take
-from ..tracklets import find_tracklets
+from ..tracklets import Tracklets, find_tracklets
 
 #: Metres: a marker farther than this from its hand's centre is not of that hand.
 HAND_RADIUS = 0.16
@@ -202,8 +203,34 @@ def _fill(centre: np.ndarray) -> np.ndarray:
     return centre[idx]
 
 
+@dataclass(frozen=True)
+class HandTracks:
+    """A take's trajectories and the hand each joined in the centre tracker (:func:`track_hands`):
+    ``tracklets``, the tracklet of each sample ``ids`` int ``(F, P)`` (-1: none), and per tracklet
+    the hand it ``joined`` ``(n,)`` (-1: never near one) and the frame it joined at ``(n,)``."""
+
+    tracklets: Tracklets
+    ids: np.ndarray
+    joined: np.ndarray
+    joined_at: np.ndarray
+
+
+def track_hands(take: Take, layout: Layout, ignore: np.ndarray | None = None) -> HandTracks:
+    """The first step of :func:`find_hands`: two hand centres carried through the take and the hand
+    each trajectory joined (``ignore`` as there). Hands found again with other swaps start here."""
+    valid = take.valid.copy()
+    if ignore is not None:
+        valid &= ~(ignore if ignore.ndim == 2 else ignore[None, :])
+    pos = np.where(valid[..., None], take.positions, np.nan).astype(np.float64)
+    tracklets = find_tracklets(replace_valid(take, valid))
+    ids = tracklets.id_map(*valid.shape)
+    _, joined, joined_at = _track_centres(pos, valid, ids, len(layout), take.rate)
+    return HandTracks(tracklets, ids, joined, joined_at)
+
+
 def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
-               ignore: np.ndarray | None = None, swaps: np.ndarray | None = None) -> Hands:
+               ignore: np.ndarray | None = None, swaps: np.ndarray | None = None,
+               tracks: Callable[[], HandTracks] | None = None) -> Hands:
     """How many of ``layout``'s hands ``take`` holds and which samples belong to which.
 
     Args:
@@ -216,6 +243,8 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
         swaps: optional bool ``(F,)``: frames where the centre tracker's two hands traded places
             (found by :func:`.sides.identity_swaps` on a first labeling): the tracker's hands are swapped
             back there before trajectories are given to them.
+        tracks: called for :func:`track_hands` of the same take and ``ignore`` where they are
+            needed (a cache's: passes that find the hands again with swaps track them once).
 
     Returns:
         :class:`Hands`.
@@ -240,13 +269,12 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
         if hands == "2":
             one.info["forced"] = 2
         return one
-    tracklets = find_tracklets(replace_valid(take, valid))
-    ids = tracklets.id_map(frames, points)
-    _, joined, joined_at = _track_centres(pos, valid, ids, m, take.rate)
+    tracked = tracks() if tracks is not None else track_hands(take, layout, ignore)
+    tracklets, ids, joined = tracked.tracklets, tracked.ids, tracked.joined
     if swaps is not None and swaps.any():
         # A tracklet keeps the hand it joined: one that joined where the tracker had the hands
         # swapped joined the other one.
-        flip = np.asarray(swaps, dtype=bool)[np.maximum(joined_at, 0)] & (joined >= 0)
+        flip = np.asarray(swaps, dtype=bool)[np.maximum(tracked.joined_at, 0)] & (joined >= 0)
         joined = np.where(flip, 1 - joined, joined)
     f_idx, p_idx = np.nonzero(ids >= 0)
     samples = _Samples(f_idx, p_idx, ids[f_idx, p_idx], pos[f_idx, p_idx])

@@ -17,6 +17,7 @@ from ..hands import (
     SIDES,
     HandNaming,
     Hands,
+    HandTracks,
     SideEvidence,
     add_warning,
     body_side,
@@ -28,6 +29,7 @@ from ..hands import (
     sided_layout_names,
     swap_frames,
     swap_ranges,
+    track_hands,
 )
 from ..labelers import LABELERS
 from ..labeling import NULL, Labeling
@@ -103,9 +105,14 @@ def other_named_points(take: Take, layout: Layout, naming: HandNaming | None = N
 def remembered_hands(take: Take, layout: Layout, hands: str | int, ignore: np.ndarray | None,
                      swaps: np.ndarray | None, cache) -> Hands:
     """:func:`..hands.find_hands`, kept in ``cache`` (a copy: callers change ``both``)."""
-    key = (cache.take_key(take), tuple(layout.names), str(hands),
-           None if ignore is None else ignore.tobytes(), None if swaps is None else swaps.tobytes())
-    found = cache.remember("hands", key, lambda: find_hands(take, layout, hands, ignore=ignore, swaps=swaps))
+    tracked = (cache.take_key(take), tuple(layout.names), None if ignore is None else ignore.tobytes())
+    key = (*tracked, str(hands), None if swaps is None else swaps.tobytes())
+
+    def tracks() -> HandTracks:  # a pass that finds the hands again with swaps starts from them
+        return cache.remember("hand_tracks", tracked, lambda: track_hands(take, layout, ignore))
+
+    found = cache.remember("hands", key, lambda: find_hands(take, layout, hands, ignore=ignore, swaps=swaps,
+                                                            tracks=tracks))
     return replace(found, both=found.both.copy(), hand=found.hand.copy(), info=dict(found.info))
 
 
