@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mocap_autolabel.core.hand.finger_order import candidate_orders, checked_order, finger_groups, label_map
+from mocap_autolabel.core.hand.finger_order import (
+    candidate_orders,
+    checked_order,
+    checked_sides,
+    finger_groups,
+    label_map,
+)
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import synthesize
@@ -45,6 +51,20 @@ def test_a_wrong_finger_order_is_put_back_and_a_right_one_kept(order):
     restored[:, label_map(groups, back, m)] = wrong
     assert np.array_equal(restored, right, equal_nan=True)
     assert facts["chosen_mm"] <= 0.9 * facts["residual_mm"]
+
+
+def test_two_hands_sides_the_wrong_way_round_are_put_back():
+    layout = load_layout("tips5_hand3")
+    groups, m = finger_groups(layout), len(layout)
+    hand = _labeled(synthesize(layout, 300, seed=5), m)
+    _, facts = checked_order(hand, layout, groups)
+    mirrored = hand * np.array([-1.0, 1.0, 1.0])  # the same hand seen in a mirror: the other side
+    other = "left" if facts["side"] == "right" else "right"
+    sides, found = checked_sides([hand, mirrored], layout, groups, [other, facts["side"]])
+    assert sides == [facts["side"], other]
+    assert [order for order, _ in found] == [(0, 1, 2, 3, 4)] * 2 and [f["side"] for _, f in found] == sides
+    kept, _ = checked_sides([hand, mirrored], layout, groups, [facts["side"], other])
+    assert kept == [facts["side"], other]
 
 
 def test_the_pipeline_keeps_a_right_labeling_and_puts_back_a_take_with_two_fingers_swapped():

@@ -30,6 +30,10 @@ FRAMES = 40
 #: Another order replaces the labeling's where its median residual is at most this share of the
 #: labeling's own (a labeling right already fits best, or within noise).
 MARGIN = 0.9
+#: Two hands' sides read off their markers' shape (:func:`..hands.decide_sides`) are checked by the
+#: template hand where that decision's confidence is below this: where both hands look like one
+#: side, or their shapes flicker (a labeling with permuted fingers can turn a hand's shape).
+SIDES_CHECKED_BELOW = 0.99
 #: Markers on the hand's back or wrist (bones ``palm`` and ``*_meta``) that make the hand frame.
 HAND_MARKERS = 3
 
@@ -90,20 +94,14 @@ def _well_seen(observed: np.ndarray, frames: int) -> np.ndarray:
     return best[np.linspace(0, len(best) - 1, min(frames, len(best))).astype(int)]
 
 
-def checked_order(observed: np.ndarray, layout: Layout, groups: list[list[int]],
-                  side: str | None = None) -> tuple[tuple[int, ...], dict]:
-    """The finger order the template hand fits best for one hand's labeled markers ``observed``
-    ``(F, M, 3)`` (metres, NaN where unlabeled): the labeling's own unless another is clearly better
-    (:data:`MARGIN`); and the facts (side, median residuals in mm of the labeling's order and the
-    chosen one). ``side``: the hand's, where known (else the side the template fits better)."""
-    identity = tuple(range(len(groups)))
+def order_residuals(observed: np.ndarray, layout: Layout, groups: list[list[int]], side: str) -> np.ndarray | None:
+    """float ``(len(candidate_orders()),)``: the median marker residual (metres) of the ``side``
+    template hand solved on up to :data:`FRAMES` well-seen frames of one hand's labeled markers
+    ``observed`` ``(F, M, 3)`` (metres, NaN where unlabeled) under each candidate order; None where
+    no frame shows four markers."""
     if np.isfinite(observed[..., 0]).sum(axis=1).max(initial=0) < 4:
-        return identity, {}
+        return None
     frames = _well_seen(observed, FRAMES)
-    try:
-        side = side or detect_side(observed, layout)
-    except ValueError:  # no frame the template can be solved on
-        return identity, {}
     hand = HandModel(side=side)
     solver = HandSolver(hand, layout.place(hand)[0])
     orders = candidate_orders()
@@ -114,8 +112,54 @@ def checked_order(observed: np.ndarray, layout: Layout, groups: list[list[int]],
     stack = stack.reshape(-1, m, 3)
     residuals = solver.evaluate(solver.cold_start(stack), stack).residuals.reshape(len(orders), -1)
     with np.errstate(invalid="ignore"):
-        median = np.array([np.median(r[np.isfinite(r)]) if np.isfinite(r).any() else np.inf for r in residuals])
+        return np.array([np.median(r[np.isfinite(r)]) if np.isfinite(r).any() else np.inf for r in residuals])
+
+
+def _chosen(median: np.ndarray) -> int:
+    """The candidate order kept: the best, where it is clearly better than the labeling's own (index 0)."""
     best = int(np.argmin(median))  # the first of equals: the labeling's own order wins ties
-    chosen = orders[best] if median[best] <= MARGIN * median[0] else identity
-    return chosen, {"side": side, "residual_mm": round(float(median[0]) * 1000, 2),
-                    "chosen_mm": round(float(median[orders.index(chosen)]) * 1000, 2)}
+    return best if median[best] <= MARGIN * median[0] else 0
+
+
+def _facts(median: np.ndarray, side: str, chosen: int) -> dict:
+    return {"side": side, "residual_mm": round(float(median[0]) * 1000, 2),
+            "chosen_mm": round(float(median[chosen]) * 1000, 2)}
+
+
+def checked_order(observed: np.ndarray, layout: Layout, groups: list[list[int]],
+                  side: str | None = None) -> tuple[tuple[int, ...], dict]:
+    """The finger order the template hand fits best for one hand's labeled markers ``observed``
+    ``(F, M, 3)`` (metres, NaN where unlabeled): the labeling's own unless another is clearly better
+    (:data:`MARGIN`); and the facts (side, median residuals in mm of the labeling's order and the
+    chosen one). ``side``: the hand's, where known (else the side the template fits better in the
+    labeling's own order)."""
+    identity = tuple(range(len(groups)))
+    if np.isfinite(observed[..., 0]).sum(axis=1).max(initial=0) < 4:
+        return identity, {}
+    try:
+        side = side or detect_side(observed, layout)
+    except ValueError:  # no frame the template can be solved on
+        return identity, {}
+    median = order_residuals(observed, layout, groups, side)
+    chosen = _chosen(median)
+    return candidate_orders()[chosen], _facts(median, side, chosen)
+
+
+def checked_sides(observed: list[np.ndarray], layout: Layout, groups: list[list[int]],
+                  sides: list[str]) -> tuple[list[str], list[tuple[tuple[int, ...], dict]]]:
+    """Two hands' sides and finger orders as the template hand fits them: ``observed`` holds each
+    hand's labeled markers ``(F, M, 3)``, ``sides`` the sides decided (one left, one right). The
+    other way round replaces them where its summed residual (each hand under its best order) is
+    at most :data:`MARGIN` of theirs: a labeling whose fingers are permuted can turn the
+    handedness read off its markers. Returns the sides and each hand's :func:`checked_order`."""
+    fitted = [{s: order_residuals(o, layout, groups, s) for s in ("left", "right")} for o in observed]
+    if any(r is None for f in fitted for r in f.values()):
+        return sides, [checked_order(o, layout, groups, s) for o, s in zip(observed, sides)]
+
+    def cost(assigned: list[str]) -> float:
+        return sum(float(f[s][_chosen(f[s])]) for f, s in zip(fitted, assigned))
+
+    other = sides[::-1]
+    if cost(other) <= MARGIN * cost(sides):
+        sides = other
+    return sides, [(candidate_orders()[_chosen(f[s])], _facts(f[s], s, _chosen(f[s]))) for f, s in zip(fitted, sides)]

@@ -173,9 +173,18 @@ def finger_order_stage(run: LabelRun) -> None:
     """The fingers' order over the whole take, checked by the template hand
     (:mod:`..hand.finger_order`) for the layout-conditioned ``set`` model on a sparse set with a
     hand cluster: a hand whose labels fit the hand clearly better in another order is relabeled,
-    and the segments moved stay below "sure" for the reviewer (``info["finger_order"]``). A
-    reviewer's locked label is never moved: a hand whose new order would move one keeps its own."""
-    from ..hand.finger_order import FINGERS, checked_order, finger_groups, label_map
+    and the segments moved stay below "sure" for the reviewer (``info["finger_order"]``). Two hands
+    whose sides were read off their markers' shape with doubt are checked the other way round too:
+    a permuted labeling can turn that shape. A reviewer's locked label is never moved: a hand whose new order
+    would move one keeps its own, and locks keep the sides."""
+    from ..hand.finger_order import (
+        FINGERS,
+        SIDES_CHECKED_BELOW,
+        checked_order,
+        checked_sides,
+        finger_groups,
+        label_map,
+    )
     from ..review import SURE
     from .hands import hand_markers
 
@@ -188,10 +197,20 @@ def finger_order_stage(run: LabelRun) -> None:
     count = facts.get("count", 1)
     sides = facts.get("sides") or [None] * count  # one hand without a naming has no side decided
     per = labeling.per_sample()
+    observed = [hand_markers(run.take, per, m, h) for h in range(count)]
+    doubtful_sides = (count == 2 and run.settings.sides is None and "sides_by" not in facts
+                      and facts.get("confidence", 1.0) < SIDES_CHECKED_BELOW and not labeling.locked.any())
+    if doubtful_sides:
+        new_sides, found = checked_sides(observed, run.layout, groups, list(sides))
+        if new_sides != list(sides):
+            _swap_sides(labeling, facts, m, SURE)
+            observed = observed[::-1]
+            found = found[::-1]
+    else:
+        found = [checked_order(o, run.layout, groups, side) for o, side in zip(observed, sides)]
     checked = []
-    for h, side in enumerate(sides):
-        order, found = checked_order(hand_markers(run.take, per, m, h), run.layout, groups, side)
-        if not found:
+    for h, (side, (order, fit)) in enumerate(zip(sides, found)):
+        if not fit:
             continue
         mine = (labeling.label >= h * m) & (labeling.label < (h + 1) * m)
         new = labeling.label.astype(np.int64)
@@ -199,14 +218,27 @@ def finger_order_stage(run: LabelRun) -> None:
         moved = new != labeling.label
         changed = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
         if (moved & labeling.locked).any():  # a reviewer's label says this finger is right as it is
-            checked.append({"hand": h, **found, "kept_for_locks": changed, "moved": {}, "segments": 0})
+            checked.append({"hand": h, **fit, "kept_for_locks": changed, "moved": {}, "segments": 0})
             continue
         labeling.label = new.astype(labeling.label.dtype)
         labeling.confidence[moved] = np.minimum(labeling.confidence[moved], np.float32(SURE - 1e-3))
-        checked.append({"hand": h, **found, "moved": changed, "segments": int(moved.sum())})
+        checked.append({"hand": h, **fit, "moved": changed, "segments": int(moved.sum())})
         if changed:
             where = f"the {side} hand's " if side and count == 2 else ""
             add_warning(facts, f"{where}finger order changed by the template hand's fit ("
                                + ", ".join(f"{a} -> {b}" for a, b in changed.items()) + "): check these fingers")
     labeling.info["finger_order"] = checked
     run.timed("finger_order", t)
+
+
+def _swap_sides(labeling: Labeling, facts: dict, m: int, sure: float) -> None:
+    """Two hands' labeling (left hand's labels first) with its hands' sides swapped: each hand's
+    labels become the other's, below "sure" (``facts`` say so)."""
+    labeled = labeling.label >= 0
+    labeling.label = np.where(labeled, (labeling.label.astype(np.int64) + m) % (2 * m),
+                              labeling.label).astype(labeling.label.dtype)
+    labeling.confidence[labeled] = np.minimum(labeling.confidence[labeled], np.float32(sure - 1e-3))
+    facts["by_hand_order"] = facts["by_hand_order"][::-1]
+    facts["sides_by"] = "the template hand's fit"
+    add_warning(facts, "the sides read off the markers' shape were swapped by the template hand's fit: "
+                       "check the sides (--sides)")
