@@ -22,7 +22,14 @@ from .review import marker_slack, missing_marker_distance
 from .settings import Corrections, LabelSettings
 from .stages.decide import TEMPORAL_MODES, decide_stage, temporal_mode
 from .stages.hands import find_hands_stage, name_sides_stage
-from .stages.refine import finger_order_stage, one_hand_stage, props_stage, refine_stage, validate_stage
+from .stages.refine import (
+    finger_order_stage,
+    holders_stage,
+    one_hand_stage,
+    props_stage,
+    refine_stage,
+    validate_stage,
+)
 from .stages.run import Attempt, LabelRun, Progress, Retry, no_progress
 from .stages.scoring import score_stage
 from .take import Take
@@ -30,7 +37,7 @@ from .windows import label_in_windows, relabel_around
 
 #: The stages of a pass, in order.
 STAGES = (find_hands_stage, score_stage, decide_stage, refine_stage, validate_stage, name_sides_stage,
-          one_hand_stage, props_stage, finger_order_stage)
+          one_hand_stage, props_stage, finger_order_stage, holders_stage)
 
 DEFAULT_SETTINGS = LabelSettings()
 NO_CORRECTIONS = Corrections()

@@ -461,6 +461,15 @@ def _rebuild(labeling: Labeling, per: np.ndarray, conf: np.ndarray, locked: np.n
     return out
 
 
+def relabel_samples(labeling: Labeling, per: np.ndarray, edited: np.ndarray, cap: float) -> Labeling:
+    """``labeling`` with the per-sample labels ``per`` ``(F, P)`` in place of its own: segments cut
+    where the labels change, the ``edited`` samples' confidence at most ``cap`` (a check that moved
+    labels: the reviewer sees them). Evidence is dropped, as for a reviewer's edit."""
+    confidence = labeling.per_sample_confidence()
+    confidence[edited] = np.minimum(confidence[edited], np.float32(cap))
+    return _rebuild(labeling, per, confidence, _paint_flags(labeling), np.zeros(per.shape, dtype=bool), edited)
+
+
 def apply_constraints(labeling: Labeling, constraints: list[Constraint]) -> Labeling:
     """The labeling with the user's new decisions made, and nothing else changed.
 

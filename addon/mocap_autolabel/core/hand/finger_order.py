@@ -44,10 +44,15 @@ def _role(marker: Marker) -> str:
     return "tip" if segment == "dist" and marker.along >= 0.5 else segment
 
 
+def hand_cluster(layout: Layout) -> bool:
+    """Whether ``layout`` has at least :data:`HAND_MARKERS` markers on the hand's back or wrist: a
+    hand frame the template hand's fit can stand on."""
+    return sum(m.bone == "palm" or m.bone.endswith("_meta") for m in layout.markers) >= HAND_MARKERS
+
+
 def finger_groups(layout: Layout) -> list[list[int]] | None:
     """Each finger's markers (indices into ``layout``, in the same order of roles for every finger),
     thumb first; None where the layout cannot be checked (see the module's docstring)."""
-    hand = sum(m.bone == "palm" or m.bone.endswith("_meta") for m in layout.markers)
     groups, roles = [], None
     for finger in FINGERS:
         members = sorted((_role(m), i) for i, m in enumerate(layout.markers)
@@ -57,7 +62,7 @@ def finger_groups(layout: Layout) -> list[list[int]] | None:
             return None
         roles = these
         groups.append([i for _, i in members])
-    return groups if hand >= HAND_MARKERS else None
+    return groups if hand_cluster(layout) else None
 
 
 def candidate_orders() -> list[tuple[int, ...]]:

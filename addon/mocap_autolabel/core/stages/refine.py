@@ -242,3 +242,77 @@ def _swap_sides(labeling: Labeling, facts: dict, m: int, sure: float) -> None:
     facts["sides_by"] = "the template hand's fit"
     add_warning(facts, "the sides read off the markers' shape were swapped by the template hand's fit: "
                        "check the sides (--sides)")
+
+
+def holders_stage(run: LabelRun) -> None:
+    """Which trajectory holds each marker, checked by the template hand (:mod:`..hand.holders`) for
+    the layout-conditioned ``set`` model on a sparse set with a hand cluster: a null trajectory
+    that fits the hand clearly better in a label's place than the trajectory holding that label
+    takes it over its frames (the holder's samples there become null). What moved stays below
+    "sure"; a reviewer's locked sample is never moved (``info["holders"]``)."""
+    from ..hand.calibrate import detect_side
+    from ..hand.finger_order import hand_cluster
+    from ..hand.holders import MIN_FRAMES, MOST, better_holders
+    from ..labeling import EMPTY, NULL
+    from ..review import SURE, relabel_samples
+    from .hands import hand_markers
+
+    layout = run.layout
+    if not (hand_cluster(layout) and getattr(run.labeler, "layout_conditioned", False)):
+        return
+    t = time.perf_counter()
+    labeling, m, take = run.labeling, len(layout), run.take
+    facts = labeling.info["hands"]
+    count = facts.get("count", 1)
+    sides = facts.get("sides") or [None] * count
+    per = labeling.per_sample()
+    positions = np.where(take.valid[..., None], take.positions, np.nan)
+    pieces = np.flatnonzero((labeling.label == NULL) & (labeling.length >= MIN_FRAMES) & ~labeling.locked)
+    pieces = pieces[np.lexsort((labeling.start[pieces], labeling.slot[pieces], -labeling.length[pieces]))]
+    locked = labeling._paint(labeling.locked, False, bool)
+    moved = np.zeros(per.shape, dtype=bool)
+    taken = []
+    for h, side in enumerate(sides):
+        observed = hand_markers(take, per, m, h)
+        seen = np.isfinite(observed[..., 0])
+        centre = np.where(seen[..., None], observed, 0.0).sum(axis=1) / np.where(seen.any(axis=1), seen.sum(axis=1),
+                                                                                np.nan)[:, None]
+        near = [i for i in pieces if _near(positions, centre, labeling.slot[i], labeling.start[i], labeling.stop[i])]
+        if not near:
+            continue
+        try:
+            side = side or detect_side(observed, layout)
+        except ValueError:  # no frame the template can be solved on
+            continue
+        candidates = [(int(labeling.slot[i]), int(labeling.start[i]), int(labeling.stop[i])) for i in near[:MOST]]
+        for holder in better_holders(positions, observed, candidates, layout, side):
+            label = h * m + holder.label
+            span = slice(holder.start, holder.stop)
+            others = per[span] == label
+            if moved[span, holder.slot].any() or (moved[span] & others).any():
+                continue  # one change per sample: the better one came first
+            if locked[span][others].any():
+                continue
+            per[span][others] = NULL
+            moved[span] |= others
+            ok = per[span, holder.slot] != EMPTY
+            per[span, holder.slot] = np.where(ok, label, per[span, holder.slot])
+            moved[span, holder.slot] |= ok
+            taken.append({"hand": h, "slot": holder.slot, "frames": [holder.start, holder.stop],
+                          "label": labeling.names[label], "residual_mm": round(holder.before * 1000, 2),
+                          "fitted_mm": round(holder.fitted * 1000, 2)})
+    if taken:
+        run.labeling = labeling = relabel_samples(labeling, per, moved, cap=SURE - 1e-3)
+        add_warning(labeling.info["hands"], f"{len(taken)} trajectories took a label from a trajectory the "
+                                            "template hand fits worse (a ghost riding with the hand?): check them")
+    labeling.info["holders"] = taken
+    run.timed("holders", t)
+
+
+def _near(positions: np.ndarray, centre: np.ndarray, slot: int, start: int, stop: int) -> bool:
+    """Whether a trajectory piece stays within :data:`..hands.HAND_RADIUS` of a hand's labeled
+    centre ``(F, 3)`` (NaN where none) in its median frame."""
+    with np.errstate(invalid="ignore"):
+        d = np.linalg.norm(positions[start:stop, slot] - centre[start:stop], axis=1)
+    d = d[np.isfinite(d)]
+    return bool(len(d)) and float(np.median(d)) < HAND_RADIUS
