@@ -26,8 +26,9 @@ MIN_FRAMES = 10
 #: Null trajectories checked per hand at most (the longest first): a bound on the work, never on time.
 MOST = 24
 #: A null trajectory takes a label where the hand's median RMS residual with it in the label's
-#: place is at most this share of the residual with the labeling's own (fitted on han2018's sparse
-#: sets with a hand cluster: 0.7 moved no right label there).
+#: place is at most this share of the residual with the labeling's own. On han2018's tips + hand
+#: cluster takes the ghosts' pieces fitted at 0.1-0.5 of the labeling's residual, and no right
+#: label came within 0.7.
 MARGIN = 0.7
 #: Labeled markers a frame must show to be solved on.
 SEEN = 5
