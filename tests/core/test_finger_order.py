@@ -8,6 +8,7 @@ from mocap_autolabel.core.hand.finger_order import (
     candidate_orders,
     checked_order,
     checked_sides,
+    checked_spans,
     finger_groups,
     label_map,
 )
@@ -65,6 +66,23 @@ def test_two_hands_sides_the_wrong_way_round_are_put_back():
     assert [order for order, _ in found] == [(0, 1, 2, 3, 4)] * 2 and [f["side"] for _, f in found] == sides
     kept, _ = checked_sides([hand, mirrored], layout, groups, [facts["side"], other])
     assert kept == [facts["side"], other]
+
+
+def test_a_stretch_of_the_take_in_a_wrong_order_is_found_and_the_rest_left():
+    layout = load_layout("tips5_hand3")
+    groups, m = finger_groups(layout), len(layout)
+    right = _labeled(synthesize(layout, 300, seed=3), m)
+    _, facts = checked_order(right, layout, groups)
+    swap = (0, 1, 3, 2, 4)  # middle and ring the other way round in frames 120-179 only
+    wrong = right.copy()
+    wrong[120:180][:, label_map(groups, swap, m)] = right[120:180]
+    spans = checked_spans(wrong, layout, groups, facts["side"], np.array([0, 120, 180, 300]))
+    assert [(a, b, order) for a, b, order, _ in spans] == [(120, 180, swap)]
+    assert checked_spans(right, layout, groups, facts["side"], np.array([0, 120, 180, 300])) == []
+    # too short a stretch is not judged on its own
+    short = right.copy()
+    short[120:130][:, label_map(groups, swap, m)] = right[120:130]
+    assert checked_spans(short, layout, groups, facts["side"], np.array([0, 120, 130, 300])) == []
 
 
 def test_the_pipeline_keeps_a_right_labeling_and_puts_back_a_take_with_two_fingers_swapped():

@@ -11,6 +11,7 @@ from mocap_autolabel.core.hand.finger_order import checked_order, finger_groups
 from mocap_autolabel.core.hand.holders import better_holders
 from mocap_autolabel.core.layout import Layout, load_layout
 from mocap_autolabel.core.pipeline import label_take
+from mocap_autolabel.core.process import Outputs, process_take
 from mocap_autolabel.core.settings import LabelSettings
 from mocap_autolabel.core.synth.generate import corrupt_take, synthesize
 from mocap_autolabel.core.take import read_take
@@ -56,6 +57,9 @@ def test_a_real_take_whose_pinky_tip_a_ghost_held_is_labeled_right():
     raw, truth, _ = corrupt_take(markers, 120.0, seed=1)
     layout = _reduced(han19, names)
     labeling = label_take(raw, layout, LabelSettings(hand_count=1))
+    # the front ends' entry too: the no-hand rule reads the moved segments' evidence
+    result = process_take(raw, layout, LabelSettings(hand_count=1), Outputs(check_layout=False))
+    assert np.array_equal(result.labeling.per_sample(), labeling.per_sample())
     per, ok = labeling.per_sample(), raw.valid & (truth >= 0)
     assert (per[ok] == truth[ok]).mean() == 1.0
     [moved] = labeling.info["holders"]

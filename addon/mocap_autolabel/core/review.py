@@ -464,10 +464,15 @@ def _rebuild(labeling: Labeling, per: np.ndarray, conf: np.ndarray, locked: np.n
 def relabel_samples(labeling: Labeling, per: np.ndarray, edited: np.ndarray, cap: float) -> Labeling:
     """``labeling`` with the per-sample labels ``per`` ``(F, P)`` in place of its own: segments cut
     where the labels change, the ``edited`` samples' confidence at most ``cap`` (a check that moved
-    labels: the reviewer sees them). Evidence is dropped, as for a reviewer's edit."""
+    labels: the reviewer sees them). Each segment keeps the evidence of the segment its first sample
+    was on (its length its own): the no-hand rule reads it."""
     confidence = labeling.per_sample_confidence()
     confidence[edited] = np.minimum(confidence[edited], np.float32(cap))
-    return _rebuild(labeling, per, confidence, _paint_flags(labeling), np.zeros(per.shape, dtype=bool), edited)
+    out = _rebuild(labeling, per, confidence, _paint_flags(labeling), np.zeros(per.shape, dtype=bool), edited)
+    if labeling.evidence is not None:
+        out.evidence = labeling.evidence[labeling.segment_ids()[out.start, out.slot]].copy()
+        out.evidence[:, 3] = out.length
+    return out
 
 
 def apply_constraints(labeling: Labeling, constraints: list[Constraint]) -> Labeling:

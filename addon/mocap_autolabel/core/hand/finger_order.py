@@ -30,6 +30,14 @@ FRAMES = 40
 #: Another order replaces the labeling's where its median residual is at most this share of the
 #: labeling's own (a labeling right already fits best, or within noise).
 MARGIN = 0.9
+#: A stretch of the take between the starts and ends of a hand's labeled trajectories, at least this
+#: many frames long, is checked on its own too (:func:`checked_spans`): the vote may hold a wrong
+#: order over a few trajectories' pieces only ...
+SPAN_FRAMES = 16
+#: ... solved on this many of its frames, an order replacing its own where its median residual is
+#: at most this share of the labeling's (fewer frames than the whole take's check: a wider margin).
+SPAN_SAMPLE = 8
+SPAN_MARGIN = 0.7
 #: Two hands' sides read off their markers' shape (:func:`..hands.decide_sides`) are checked by the
 #: template hand where that decision's confidence is below this: where both hands look like one
 #: side, or their shapes flicker (a labeling with permuted fingers can turn a hand's shape).
@@ -99,14 +107,15 @@ def _well_seen(observed: np.ndarray, frames: int) -> np.ndarray:
     return best[np.linspace(0, len(best) - 1, min(frames, len(best))).astype(int)]
 
 
-def order_residuals(observed: np.ndarray, layout: Layout, groups: list[list[int]], side: str) -> np.ndarray | None:
+def order_residuals(observed: np.ndarray, layout: Layout, groups: list[list[int]], side: str,
+                    frames: int = FRAMES) -> np.ndarray | None:
     """float ``(len(candidate_orders()),)``: the median marker residual (metres) of the ``side``
-    template hand solved on up to :data:`FRAMES` well-seen frames of one hand's labeled markers
+    template hand solved on up to ``frames`` well-seen frames of one hand's labeled markers
     ``observed`` ``(F, M, 3)`` (metres, NaN where unlabeled) under each candidate order; None where
     no frame shows four markers."""
     if np.isfinite(observed[..., 0]).sum(axis=1).max(initial=0) < 4:
         return None
-    frames = _well_seen(observed, FRAMES)
+    frames = _well_seen(observed, frames)
     hand = HandModel(side=side)
     solver = HandSolver(hand, layout.place(hand)[0])
     orders = candidate_orders()
@@ -120,10 +129,10 @@ def order_residuals(observed: np.ndarray, layout: Layout, groups: list[list[int]
         return np.array([np.median(r[np.isfinite(r)]) if np.isfinite(r).any() else np.inf for r in residuals])
 
 
-def _chosen(median: np.ndarray) -> int:
+def _chosen(median: np.ndarray, margin: float = MARGIN) -> int:
     """The candidate order kept: the best, where it is clearly better than the labeling's own (index 0)."""
     best = int(np.argmin(median))  # the first of equals: the labeling's own order wins ties
-    return best if median[best] <= MARGIN * median[0] else 0
+    return best if median[best] <= margin * median[0] else 0
 
 
 def _facts(median: np.ndarray, side: str, chosen: int) -> dict:
@@ -168,3 +177,22 @@ def checked_sides(observed: list[np.ndarray], layout: Layout, groups: list[list[
     if cost(other) <= MARGIN * cost(sides):
         sides = other
     return sides, [(candidate_orders()[_chosen(f[s])], _facts(f[s], s, _chosen(f[s]))) for f, s in zip(fitted, sides)]
+
+
+def checked_spans(observed: np.ndarray, layout: Layout, groups: list[list[int]], side: str,
+                  bounds: np.ndarray) -> list[tuple[int, int, tuple[int, ...], dict]]:
+    """Stretches of one hand's labeled markers ``observed`` ``(F, M, 3)`` whose finger order the
+    template hand fits clearly better otherwise (:data:`SPAN_MARGIN`): ``(start, stop, order,
+    facts)`` for each stretch between consecutive ``bounds`` (sorted frames where the hand's labeled
+    trajectories start or end) of at least :data:`SPAN_FRAMES` frames."""
+    out = []
+    for start, stop in zip(bounds[:-1], bounds[1:]):
+        if stop - start < SPAN_FRAMES:
+            continue
+        part = np.full_like(observed, np.nan)
+        part[start:stop] = observed[start:stop]
+        median = order_residuals(part, layout, groups, side, frames=SPAN_SAMPLE)
+        chosen = 0 if median is None else _chosen(median, SPAN_MARGIN)
+        if chosen:
+            out.append((int(start), int(stop), candidate_orders()[chosen], _facts(median, side, chosen)))
+    return out

@@ -177,14 +177,7 @@ def finger_order_stage(run: LabelRun) -> None:
     whose sides were read off their markers' shape with doubt are checked the other way round too:
     a permuted labeling can turn that shape. A reviewer's locked label is never moved: a hand whose new order
     would move one keeps its own, and locks keep the sides."""
-    from ..hand.finger_order import (
-        FINGERS,
-        SIDES_CHECKED_BELOW,
-        checked_order,
-        checked_sides,
-        finger_groups,
-        label_map,
-    )
+    from ..hand.finger_order import SIDES_CHECKED_BELOW, checked_order, checked_sides, checked_spans, finger_groups
     from ..review import SURE
     from .hands import hand_markers
 
@@ -212,23 +205,44 @@ def finger_order_stage(run: LabelRun) -> None:
     for h, (side, (order, fit)) in enumerate(zip(sides, found)):
         if not fit:
             continue
+        where = f"the {side} hand's " if side and count == 2 else ""
         mine = (labeling.label >= h * m) & (labeling.label < (h + 1) * m)
-        new = labeling.label.astype(np.int64)
-        new[mine] = h * m + label_map(groups, order, m)[new[mine] - h * m]
-        moved = new != labeling.label
-        changed = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
-        if (moved & labeling.locked).any():  # a reviewer's label says this finger is right as it is
-            checked.append({"hand": h, **fit, "kept_for_locks": changed, "moved": {}, "segments": 0})
-            continue
-        labeling.label = new.astype(labeling.label.dtype)
-        labeling.confidence[moved] = np.minimum(labeling.confidence[moved], np.float32(SURE - 1e-3))
-        checked.append({"hand": h, **fit, "moved": changed, "segments": int(moved.sum())})
-        if changed:
-            where = f"the {side} hand's " if side and count == 2 else ""
-            add_warning(facts, f"{where}finger order changed by the template hand's fit ("
-                               + ", ".join(f"{a} -> {b}" for a, b in changed.items()) + "): check these fingers")
+        checked.append(_reorder(labeling, groups, order, mine, h, m, facts, where) | {"hand": h, **fit})
+        if checked[-1].get("kept_for_locks"):
+            continue  # the reviewer's locks say which order is right
+        # Then each stretch between the hand's trajectories' starts and ends on its own.
+        observed = hand_markers(run.take, labeling.per_sample(), m, h)
+        bounds = np.unique(np.concatenate([[0, labeling.n_frames], labeling.start[mine], labeling.stop[mine]]))
+        for start, stop, span_order, span_fit in checked_spans(observed, run.layout, groups, fit["side"], bounds):
+            inside = mine & (labeling.start >= start) & (labeling.stop <= stop)
+            first = start + run.take.first_frame
+            checked.append(_reorder(labeling, groups, span_order, inside, h, m, facts,
+                                    f"{where}frames {first}-{stop - 1 + run.take.first_frame}: ")
+                           | {"hand": h, "frames": [start, stop], **span_fit})
     labeling.info["finger_order"] = checked
     run.timed("finger_order", t)
+
+
+def _reorder(labeling: Labeling, groups: list[list[int]], order: tuple[int, ...], selected: np.ndarray, h: int,
+             m: int, facts: dict, where: str) -> dict:
+    """The ``selected`` segments of hand ``h`` relabeled under the finger ``order``, below "sure",
+    with a warning (``where`` begins it); none where that would move a reviewer's lock. Returns the
+    facts of the change."""
+    from ..hand.finger_order import FINGERS, label_map
+    from ..review import SURE
+
+    new = labeling.label.astype(np.int64)
+    new[selected] = h * m + label_map(groups, order, m)[new[selected] - h * m]
+    moved = new != labeling.label
+    changed = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
+    if (moved & labeling.locked).any():  # a reviewer's label says this finger is right as it is
+        return {"kept_for_locks": changed, "moved": {}, "segments": 0}
+    labeling.label = new.astype(labeling.label.dtype)
+    labeling.confidence[moved] = np.minimum(labeling.confidence[moved], np.float32(SURE - 1e-3))
+    if changed:
+        add_warning(facts, f"{where}finger order changed by the template hand's fit ("
+                           + ", ".join(f"{a} -> {b}" for a, b in changed.items()) + "): check these fingers")
+    return {"moved": changed, "segments": int(moved.sum())}
 
 
 def _swap_sides(labeling: Labeling, facts: dict, m: int, sure: float) -> None:
