@@ -38,6 +38,9 @@ SPAN_FRAMES = 16
 #: at most this share of the labeling's (fewer frames than the whole take's check: a wider margin).
 SPAN_SAMPLE = 8
 SPAN_MARGIN = 0.7
+#: Stretches checked per hand at most, the longest first: a bound on the work (a long take's
+#: trajectories break into hundreds of stretches), never on time.
+SPANS = 4
 #: Two hands' sides read off their markers' shape (:func:`..hands.decide_sides`) are checked by the
 #: template hand where that decision's confidence is below this: where both hands look like one
 #: side, or their shapes flicker (a labeling with permuted fingers can turn a hand's shape).
@@ -184,11 +187,10 @@ def checked_spans(observed: np.ndarray, layout: Layout, groups: list[list[int]],
     """Stretches of one hand's labeled markers ``observed`` ``(F, M, 3)`` whose finger order the
     template hand fits clearly better otherwise (:data:`SPAN_MARGIN`): ``(start, stop, order,
     facts)`` for each stretch between consecutive ``bounds`` (sorted frames where the hand's labeled
-    trajectories start or end) of at least :data:`SPAN_FRAMES` frames."""
+    trajectories start or end) of at least :data:`SPAN_FRAMES` frames, the :data:`SPANS` longest."""
+    spans = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if b - a >= SPAN_FRAMES]
     out = []
-    for start, stop in zip(bounds[:-1], bounds[1:]):
-        if stop - start < SPAN_FRAMES:
-            continue
+    for start, stop in sorted(sorted(spans, key=lambda ab: ab[0] - ab[1])[:SPANS]):
         part = np.full_like(observed, np.nan)
         part[start:stop] = observed[start:stop]
         median = order_residuals(part, layout, groups, side, frames=SPAN_SAMPLE)
