@@ -19,6 +19,14 @@ def small_take(frames: int = 50, points: int = 4, seed: int = 0, gaps: bool = Tr
     return Take(positions=positions, names=[f"*{i}" for i in range(points)], rate=100.0, source="small.c3d")
 
 
+def true_markers(synth, m: int) -> np.ndarray:
+    """``(F, M, 3)`` the true labeled positions of a synthetic take (metres, NaN where unseen)."""
+    out = np.full((synth.take.n_frames, m, 3), np.nan)
+    f, p = np.nonzero(synth.labels >= 0)
+    out[f, synth.labels[f, p]] = synth.take.positions[f, p]
+    return out
+
+
 def synthetic_takes(folder, count: int, frames: int = 300) -> list:
     """``count`` raw synthetic han19 takes (seeds 0, 1, ...) written as ``folder/synth<seed>.c3d``; their paths."""
     from mocap_autolabel.core.formats.c3d import write_c3d

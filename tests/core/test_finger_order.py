@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import true_markers
 from mocap_autolabel.core.hand.finger_order import (
     candidate_orders,
     checked_order,
@@ -15,14 +16,6 @@ from mocap_autolabel.core.hand.finger_order import (
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.pipeline import label_take
 from mocap_autolabel.core.synth.generate import synthesize
-
-
-def _labeled(synth, m: int) -> np.ndarray:
-    """``(F, M, 3)`` the true labeled positions of a synthetic take (NaN where unseen)."""
-    out = np.full((synth.take.n_frames, m, 3), np.nan)
-    f, p = np.nonzero(synth.labels >= 0)
-    out[f, synth.labels[f, p]] = synth.take.positions[f, p]
-    return out
 
 
 def test_which_layouts_are_checked():
@@ -42,7 +35,7 @@ def test_a_wrong_finger_order_is_put_back_and_a_right_one_kept(order):
     layout = load_layout("tips5_hand3")
     groups, m = finger_groups(layout), len(layout)
     synth = synthesize(layout, 300, seed=5)
-    right = _labeled(synth, m)
+    right = true_markers(synth, m)
     kept, facts = checked_order(right, layout, groups)
     assert kept == (0, 1, 2, 3, 4) and facts["side"] in ("left", "right")
     wrong = np.full_like(right, np.nan)
@@ -57,7 +50,7 @@ def test_a_wrong_finger_order_is_put_back_and_a_right_one_kept(order):
 def test_two_hands_sides_the_wrong_way_round_are_put_back():
     layout = load_layout("tips5_hand3")
     groups, m = finger_groups(layout), len(layout)
-    hand = _labeled(synthesize(layout, 300, seed=5), m)
+    hand = true_markers(synthesize(layout, 300, seed=5), m)
     _, facts = checked_order(hand, layout, groups)
     mirrored = hand * np.array([-1.0, 1.0, 1.0])  # the same hand seen in a mirror: the other side
     other = "left" if facts["side"] == "right" else "right"
@@ -71,7 +64,7 @@ def test_two_hands_sides_the_wrong_way_round_are_put_back():
 def test_a_stretch_of_the_take_in_a_wrong_order_is_found_and_the_rest_left():
     layout = load_layout("tips5_hand3")
     groups, m = finger_groups(layout), len(layout)
-    right = _labeled(synthesize(layout, 300, seed=3), m)
+    right = true_markers(synthesize(layout, 300, seed=3), m)
     _, facts = checked_order(right, layout, groups)
     swap = (0, 1, 3, 2, 4)  # middle and ring the other way round in frames 120-179 only
     wrong = right.copy()

@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 from conftest import data_path
+from helpers import true_markers
 from mocap_autolabel.core.hand.finger_order import checked_order, finger_groups
 from mocap_autolabel.core.hand.holders import better_holders
 from mocap_autolabel.core.layout import Layout, load_layout
@@ -17,18 +18,11 @@ from mocap_autolabel.core.synth.generate import corrupt_take, synthesize
 from mocap_autolabel.core.take import read_take
 
 
-def _labeled(synth, m: int) -> np.ndarray:
-    out = np.full((synth.take.n_frames, m, 3), np.nan)
-    f, p = np.nonzero(synth.labels >= 0)
-    out[f, synth.labels[f, p]] = synth.take.positions[f, p]
-    return out
-
-
 def test_a_ghost_that_holds_a_fingertip_gives_it_back_to_the_fingertip():
     layout = load_layout("tips5_hand3")
     m, pinky = len(layout), layout.names.index("PinkyTip")
     synth = synthesize(layout, 200, seed=3)
-    right = _labeled(synth, m)
+    right = true_markers(synth, m)
     _, facts = checked_order(right, layout, finger_groups(layout))
     # A ring riding with the hand, 9 cm off the hand cluster's centre: taken for the pinky tip.
     cluster = synth.markers[:, [i for i, mk in enumerate(layout.markers) if mk.bone == "palm"]].mean(axis=1)
