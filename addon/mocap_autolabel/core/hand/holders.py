@@ -30,6 +30,8 @@ MOST = 24
 #: cluster takes the ghosts' pieces fitted at 0.1-0.5 of the labeling's residual, and no right
 #: label came within 0.7.
 MARGIN = 0.7
+#: ... and at least this much lower (metres): near the noise a ratio says nothing.
+MIN_GAIN = 0.002
 #: Labeled markers a frame must show to be solved on.
 SEEN = 5
 
@@ -50,8 +52,8 @@ class Holder:
 
 def better_holders(positions: np.ndarray, observed: np.ndarray, candidates: list[tuple[int, int, int]],
                    layout: Layout, side: str) -> list[Holder]:
-    """The null trajectory pieces that fit the template hand clearly better (:data:`MARGIN`) in a
-    label's place than the labeling's own holder of that label, best first.
+    """The null trajectory pieces that fit the template hand clearly better (:data:`MARGIN`,
+    :data:`MIN_GAIN`) in a label's place than the labeling's own holder of that label, best first.
 
     Args:
         positions: ``(F, P, 3)`` the take's points (metres).
@@ -83,7 +85,7 @@ def better_holders(positions: np.ndarray, observed: np.ndarray, candidates: list
         if not len(labels) or not np.isfinite(rms).all():
             continue
         best = int(np.argmin(rms[1:]))
-        if rms[1 + best] <= MARGIN * rms[0]:
+        if rms[1 + best] <= min(MARGIN * rms[0], rms[0] - MIN_GAIN):
             found.append(Holder(int(slot), int(start), int(stop), int(labels[best]), float(rms[1 + best]),
                                 float(rms[0])))
     return sorted(found, key=lambda h: (h.fitted / h.before, h.slot, h.start))

@@ -317,8 +317,11 @@ def holders_stage(run: LabelRun) -> None:
                           "fitted_mm": round(holder.fitted * 1000, 2)})
     if taken:
         run.labeling = labeling = relabel_samples(labeling, per, moved, cap=SURE - 1e-3)
-        add_warning(labeling.info["hands"], f"{len(taken)} trajectories took a label from a trajectory the "
-                                            "template hand fits worse (a ghost riding with the hand?): check them")
+        first = take.first_frame
+        where = ", ".join(f"{t['label']} in frames {t['frames'][0] + first}-{t['frames'][1] - 1 + first}"
+                          for t in taken)
+        add_warning(labeling.info["hands"], f"given to another trajectory by the template hand's fit (a ghost "
+                                            f"riding with the hand held it?): {where}: check them")
     labeling.info["holders"] = taken
     run.timed("holders", t)
 
