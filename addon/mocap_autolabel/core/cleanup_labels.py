@@ -83,7 +83,7 @@ def mark_suspects(labeling: Labeling, review: Review, suspect: np.ndarray) -> tu
                          f"got {suspect.shape}")
     per = labeling.per_sample()
     present = per != EMPTY
-    locked = labeling._paint(labeling.locked, False, bool)
+    locked = labeling.per_sample_locked()
     conf = labeling.per_sample_confidence()
     labeled = suspect & (per >= 0)
     mark = labeled & ~locked

@@ -102,6 +102,10 @@ class Labeling:
         """float32 ``(frames, points)``: the confidence of every sample's segment, NaN where none."""
         return self._paint(self.confidence, np.nan, np.float32)
 
+    def per_sample_locked(self) -> np.ndarray:
+        """bool ``(frames, points)``: whether every sample's segment is locked by a reviewer."""
+        return self._paint(self.locked, False, bool)
+
     def segment_ids(self) -> np.ndarray:
         """int32 ``(frames, points)``: the segment of every sample, -1 where none."""
         return self._paint(np.arange(len(self)), -1, np.int32)

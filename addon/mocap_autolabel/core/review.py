@@ -440,7 +440,7 @@ class Review:
 
 
 def _paint_flags(labeling: Labeling) -> np.ndarray:
-    return labeling._paint(labeling.locked, False, bool)
+    return labeling.per_sample_locked()
 
 
 def _rebuild(labeling: Labeling, per: np.ndarray, conf: np.ndarray, locked: np.ndarray,

@@ -173,10 +173,11 @@ def finger_order_stage(run: LabelRun) -> None:
     """The fingers' order over the whole take, checked by the template hand
     (:mod:`..hand.finger_order`) for the layout-conditioned ``set`` model on a sparse set with a
     hand cluster: a hand whose labels fit the hand clearly better in another order is relabeled,
-    and the segments moved stay below "sure" for the reviewer (``info["finger_order"]``). Two hands
-    whose sides were read off their markers' shape with doubt are checked the other way round too:
-    a permuted labeling can turn that shape. A reviewer's locked label is never moved: a hand whose new order
-    would move one keeps its own, and locks keep the sides."""
+    and the segments moved stay below "sure" for the reviewer (``info["finger_order"]``); then each
+    stretch between the hand's trajectories' starts and ends on its own (:func:`..hand.finger_order.
+    checked_spans`). Two hands whose sides were read off their markers' shape with doubt are checked
+    the other way round too: a permuted labeling can turn that shape. A reviewer's locked label is
+    never moved: a hand whose new order would move one keeps its own, and locks keep the sides."""
     from ..hand.finger_order import SIDES_CHECKED_BELOW, checked_order, checked_sides, checked_spans, finger_groups
     from ..review import SURE
     from .hands import hand_markers
@@ -283,7 +284,7 @@ def holders_stage(run: LabelRun) -> None:
     positions = np.where(take.valid[..., None], take.positions, np.nan)
     pieces = np.flatnonzero((labeling.label == NULL) & (labeling.length >= MIN_FRAMES) & ~labeling.locked)
     pieces = pieces[np.lexsort((labeling.start[pieces], labeling.slot[pieces], -labeling.length[pieces]))]
-    locked = labeling._paint(labeling.locked, False, bool)
+    locked = labeling.per_sample_locked()
     moved = np.zeros(per.shape, dtype=bool)
     taken = []
     for h, side in enumerate(sides):
@@ -294,8 +295,9 @@ def holders_stage(run: LabelRun) -> None:
         near = [i for i in pieces if _near(positions, centre, labeling.slot[i], labeling.start[i], labeling.stop[i])]
         if not near:
             continue
-        try:
-            side = side or detect_side(observed, layout)
+        fitted = [f["side"] for f in labeling.info.get("finger_order", []) if f["hand"] == h and "side" in f]
+        try:  # the side the finger-order check solved the hand as, where it ran
+            side = side or (fitted[0] if fitted else detect_side(observed, layout))
         except ValueError:  # no frame the template can be solved on
             continue
         candidates = [(int(labeling.slot[i]), int(labeling.start[i]), int(labeling.stop[i])) for i in near[:MOST]]
