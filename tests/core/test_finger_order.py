@@ -115,3 +115,34 @@ def test_a_reviewers_lock_is_never_moved_by_the_check():
     [checked] = labeling.info["finger_order"]
     assert checked["moved"] == {} and checked["kept_for_locks"] == {"middle": "ring", "ring": "middle"}
     assert labeling.per_sample()[lock.start, lock.slot] == middle
+
+
+def test_two_real_sparse_hands_whose_shape_gave_the_wrong_sides_get_them_put_back():
+    # han2018 User1 capture2 sequence 16, both files as one take reduced to tips + a hand cluster
+    # and corrupted as benchmarks/two_hands.py does: both hands' labels look like right hands' (a
+    # permuted finger order turns the shape), and the shape's call had the sides the wrong way round.
+    import os
+
+    from conftest import data_path
+    from mocap_autolabel.core.layout import Layout
+    from mocap_autolabel.core.review import SURE
+    from mocap_autolabel.core.synth.generate import corrupt_take
+    from mocap_autolabel.core.take import read_take
+
+    han19 = load_layout("han19")
+    names = ["ThumbTip", "IndexTip", "MiddleTip", "RingTip", "PinkyTip", "BackHand1", "BackHand2", "BackHand3"]
+    by_name = {mk.name: mk for mk in han19.markers}
+    layout = Layout("tips5+back", tuple(by_name[n] for n in names), han19.glove, "han19 subset")
+    folder = data_path("hands", "han2018_dense19", "User1", "capture2")
+    files = [read_take(os.path.join(str(folder), f"sequence.16_training_dense_{side}.trc"))
+             for side in ("left", "right")]
+    n = min(t.n_frames for t in files)
+    markers = np.concatenate([t.positions[:n, [t.names.index(x) for x in names]] for t in files], axis=1)
+    take, truth, _ = corrupt_take(markers.astype(np.float64), 120.0, seed=34)
+    labeling = label_take(take, layout)
+    facts = labeling.info["hands"]
+    assert facts["sides_by"] == "the template hand's fit" and "check the sides" in facts["warning"]
+    per, m = labeling.per_sample(), len(layout)
+    ok = take.valid & (truth >= 0) & (per >= 0)
+    assert ((truth[ok] < m) == (per[ok] < m)).mean() > 0.9  # each hand's labels on its own side
+    assert (labeling.confidence[labeling.label >= 0] < SURE).all()
