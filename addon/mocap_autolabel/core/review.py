@@ -439,10 +439,6 @@ class Review:
         return cls([Constraint(*(int(v) for v in row)) for row in c], [(int(a), int(b)) for a, b in s])
 
 
-def _paint_flags(labeling: Labeling) -> np.ndarray:
-    return labeling.per_sample_locked()
-
-
 def _rebuild(labeling: Labeling, per: np.ndarray, conf: np.ndarray, locked: np.ndarray,
              cut: np.ndarray, edited: np.ndarray | None = None) -> Labeling:
     """A Labeling from edited per-sample arrays: a segment starts at every old segment start, at
@@ -468,7 +464,7 @@ def relabel_samples(labeling: Labeling, per: np.ndarray, edited: np.ndarray, cap
     was on (its length its own): the no-hand rule reads it."""
     confidence = labeling.per_sample_confidence()
     confidence[edited] = np.minimum(confidence[edited], np.float32(cap))
-    out = _rebuild(labeling, per, confidence, _paint_flags(labeling), np.zeros(per.shape, dtype=bool), edited)
+    out = _rebuild(labeling, per, confidence, labeling.per_sample_locked(), np.zeros(per.shape, dtype=bool), edited)
     if labeling.evidence is not None:
         out.evidence = labeling.evidence[labeling.segment_ids()[out.start, out.slot]].copy()
         out.evidence[:, 3] = out.length
@@ -486,7 +482,7 @@ def apply_constraints(labeling: Labeling, constraints: list[Constraint]) -> Labe
     """
     per = labeling.per_sample()
     conf = labeling.per_sample_confidence()
-    locked = _paint_flags(labeling)
+    locked = labeling.per_sample_locked()
     changed = np.zeros(per.shape, dtype=bool)
     for c in constraints:
         rows = slice(c.start, c.stop)
@@ -513,7 +509,8 @@ def apply_split(labeling: Labeling, slot: int, frame: int) -> Labeling:
     """The labeling with the segment of ``slot`` cut before ``frame`` (labels unchanged)."""
     cut = np.zeros((labeling.n_frames, labeling.n_points), dtype=bool)
     cut[frame, slot] = True
-    return _rebuild(labeling, labeling.per_sample(), labeling.per_sample_confidence(), _paint_flags(labeling), cut)
+    return _rebuild(labeling, labeling.per_sample(), labeling.per_sample_confidence(), labeling.per_sample_locked(),
+                    cut)
 
 
 def labeling_to_arrays(labeling: Labeling) -> dict:

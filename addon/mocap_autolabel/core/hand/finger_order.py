@@ -138,9 +138,12 @@ def _chosen(median: np.ndarray, margin: float = MARGIN) -> int:
     return best if median[best] <= margin * median[0] else 0
 
 
-def _facts(median: np.ndarray, side: str, chosen: int) -> dict:
-    return {"side": side, "residual_mm": round(float(median[0]) * 1000, 2),
-            "chosen_mm": round(float(median[chosen]) * 1000, 2)}
+def _decided(median: np.ndarray, side: str, margin: float = MARGIN) -> tuple[tuple[int, ...], dict]:
+    """The order kept (:func:`_chosen`) from :func:`order_residuals`' ``median``, and its facts: the
+    side, the median residuals in mm of the labeling's order and the chosen one."""
+    chosen = _chosen(median, margin)
+    return candidate_orders()[chosen], {"side": side, "residual_mm": round(float(median[0]) * 1000, 2),
+                                        "chosen_mm": round(float(median[chosen]) * 1000, 2)}
 
 
 def checked_order(observed: np.ndarray, layout: Layout, groups: list[list[int]],
@@ -151,15 +154,12 @@ def checked_order(observed: np.ndarray, layout: Layout, groups: list[list[int]],
     chosen one). ``side``: the hand's, where known (else the side the template fits better in the
     labeling's own order)."""
     identity = tuple(range(len(groups)))
-    if np.isfinite(observed[..., 0]).sum(axis=1).max(initial=0) < 4:
-        return identity, {}
     try:
         side = side or detect_side(observed, layout)
     except ValueError:  # no frame the template can be solved on
         return identity, {}
     median = order_residuals(observed, layout, groups, side)
-    chosen = _chosen(median)
-    return candidate_orders()[chosen], _facts(median, side, chosen)
+    return (identity, {}) if median is None else _decided(median, side)
 
 
 def checked_sides(observed: list[np.ndarray], layout: Layout, groups: list[list[int]],
@@ -179,7 +179,7 @@ def checked_sides(observed: list[np.ndarray], layout: Layout, groups: list[list[
     other = sides[::-1]
     if cost(other) <= MARGIN * cost(sides):
         sides = other
-    return sides, [(candidate_orders()[_chosen(f[s])], _facts(f[s], s, _chosen(f[s]))) for f, s in zip(fitted, sides)]
+    return sides, [_decided(f[s], s) for f, s in zip(fitted, sides)]
 
 
 def checked_spans(observed: np.ndarray, layout: Layout, groups: list[list[int]], side: str,
@@ -194,7 +194,6 @@ def checked_spans(observed: np.ndarray, layout: Layout, groups: list[list[int]],
         part = np.full_like(observed, np.nan)
         part[start:stop] = observed[start:stop]
         median = order_residuals(part, layout, groups, side, frames=SPAN_SAMPLE)
-        chosen = 0 if median is None else _chosen(median, SPAN_MARGIN)
-        if chosen:
-            out.append((int(start), int(stop), candidate_orders()[chosen], _facts(median, side, chosen)))
+        if median is not None and _chosen(median, SPAN_MARGIN):
+            out.append((start, stop, *_decided(median, side, SPAN_MARGIN)))
     return out

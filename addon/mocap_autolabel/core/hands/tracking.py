@@ -215,13 +215,19 @@ class HandTracks:
     joined_at: np.ndarray
 
 
-def track_hands(take: Take, layout: Layout, ignore: np.ndarray | None = None) -> HandTracks:
-    """The first step of :func:`find_hands`: two hand centres carried through the take and the hand
-    each trajectory joined (``ignore`` as there). Hands found again with other swaps start here."""
+def _kept(take: Take, ignore: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The samples offered to the hands, bool ``(F, P)``, and their positions ``(F, P, 3)`` float64
+    (metres, NaN elsewhere): ``ignore`` as in :func:`find_hands`."""
     valid = take.valid.copy()
     if ignore is not None:
         valid &= ~(ignore if ignore.ndim == 2 else ignore[None, :])
-    pos = np.where(valid[..., None], take.positions, np.nan).astype(np.float64)
+    return valid, np.where(valid[..., None], take.positions, np.nan).astype(np.float64)
+
+
+def track_hands(take: Take, layout: Layout, ignore: np.ndarray | None = None) -> HandTracks:
+    """The first step of :func:`find_hands`: two hand centres carried through the take and the hand
+    each trajectory joined (``ignore`` as there). Hands found again with other swaps start here."""
+    valid, pos = _kept(take, ignore)
     tracklets = find_tracklets(replace_valid(take, valid))
     ids = tracklets.id_map(*valid.shape)
     _, joined, joined_at = _track_centres(pos, valid, ids, len(layout), take.rate)
@@ -253,11 +259,8 @@ def find_hands(take: Take, layout: Layout, hands: str | int = "auto",
     if hands not in HANDS:
         raise ValueError(f"hands must be one of {', '.join(HANDS)}, not {hands!r}")
     m = len(layout)
-    valid = take.valid.copy()
-    if ignore is not None:
-        valid &= ~(ignore if ignore.ndim == 2 else ignore[None, :])
+    valid, pos = _kept(take, ignore)
     frames, points = valid.shape
-    pos = np.where(valid[..., None], take.positions, np.nan).astype(np.float64)
     one = Hands(1, np.where(valid, 0, -1).astype(np.int8), np.zeros_like(valid), np.full((frames, 2, 3), np.nan),
                 info={"count": 1})
     if hands == "1" or not valid.any():

@@ -215,6 +215,16 @@ def hand_markers(take: Take, per: np.ndarray, m: int, hand: int) -> np.ndarray:
     return observed
 
 
+def labeled_centre(observed: np.ndarray) -> np.ndarray:
+    """``(F, 3)``: the mean of one hand's labeled markers ``observed`` ``(F, M, 3)`` per frame (metres,
+    NaN where none is labeled)."""
+    count = np.isfinite(observed[..., 0]).sum(axis=1)
+    seen = count > 0  # a mean of frames with labels only: no empty slices
+    centre = np.full((len(observed), 3), np.nan)
+    centre[seen] = np.nansum(observed[seen], axis=1) / count[seen, None]
+    return centre
+
+
 def labeled_handedness(take: Take, layout: Layout, labeling: Labeling, hands: int) -> np.ndarray:
     """int8 ``(F, hands)``: the handedness of each hand's labeled markers per frame
     (:func:`..hands.handedness`; 0 throughout for a layout of fewer than four markers)."""
@@ -237,10 +247,7 @@ def body_evidence(take: Take, layout: Layout, labeling: Labeling, hands: int) ->
     per = labeling.per_sample()
     centres = np.full((take.n_frames, hands, 3), np.nan)
     for h in range(hands):
-        observed = hand_markers(take, per, len(layout), h)
-        count = np.isfinite(observed[..., 0]).sum(axis=1)
-        seen = count > 0  # a mean of frames with labels only: no empty slices
-        centres[seen, h] = np.nansum(observed[seen], axis=1) / count[seen, None]
+        centres[:, h] = labeled_centre(hand_markers(take, per, len(layout), h))
     return body_side_evidence(take.positions[:, cols], [body_side(take.names[c]) for c in cols], centres)
 
 

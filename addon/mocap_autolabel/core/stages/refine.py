@@ -270,7 +270,7 @@ def holders_stage(run: LabelRun) -> None:
     from ..hand.holders import MIN_FRAMES, MOST, better_holders
     from ..labeling import EMPTY, NULL
     from ..review import SURE, relabel_samples
-    from .hands import hand_markers
+    from .hands import hand_markers, labeled_centre
 
     layout = run.layout
     if not (hand_cluster(layout) and getattr(run.labeler, "layout_conditioned", False)):
@@ -281,7 +281,7 @@ def holders_stage(run: LabelRun) -> None:
     count = facts.get("count", 1)
     sides = facts.get("sides") or [None] * count
     per = labeling.per_sample()
-    positions = np.where(take.valid[..., None], take.positions, np.nan)
+    positions = take.positions  # NaN where no sample
     pieces = np.flatnonzero((labeling.label == NULL) & (labeling.length >= MIN_FRAMES) & ~labeling.locked)
     pieces = pieces[np.lexsort((labeling.start[pieces], labeling.slot[pieces], -labeling.length[pieces]))]
     locked = labeling.per_sample_locked()
@@ -289,9 +289,7 @@ def holders_stage(run: LabelRun) -> None:
     taken = []
     for h, side in enumerate(sides):
         observed = hand_markers(take, per, m, h)
-        seen = np.isfinite(observed[..., 0])
-        centre = np.where(seen[..., None], observed, 0.0).sum(axis=1) / np.where(seen.any(axis=1), seen.sum(axis=1),
-                                                                                np.nan)[:, None]
+        centre = labeled_centre(observed)
         near = [i for i in pieces if _near(positions, centre, labeling.slot[i], labeling.start[i], labeling.stop[i])]
         if not near:
             continue
