@@ -125,16 +125,18 @@ class Calibration:
 
 
 def detect_side(observed: np.ndarray, layout: Layout, hand: HandModel | None = None, sample: int = 24) -> str:
-    """``"left"`` or ``"right"``: the side whose hand fits ``observed (F, M, 3)`` better."""
+    """``"left"`` or ``"right"``: the side whose hand fits ``observed (F, M, 3)`` better: the lower
+    median marker residual, which one mislabeled marker (a ghost holding a fingertip of a sparse
+    set) cannot rule as it rules the RMS."""
     hand = hand or HandModel()
     frames = _well_seen(observed)
     frames = frames[np.linspace(0, len(frames) - 1, min(sample, len(frames))).astype(int)]
-    rms = {}
+    median = {}
     for side in ("left", "right"):
         h = HandModel(hand.length, hand.breadth, side)
         solver = HandSolver(h, layout.place(h)[0])
-        rms[side] = np.nanmedian(solver.evaluate(solver.cold_start(observed[frames]), observed[frames]).rms)
-    return min(rms, key=rms.get)
+        median[side] = np.nanmedian(solver.evaluate(solver.cold_start(observed[frames]), observed[frames]).residuals)
+    return min(median, key=median.get)
 
 
 def _well_seen(observed: np.ndarray) -> np.ndarray:
