@@ -66,7 +66,7 @@ def better_holders(positions: np.ndarray, observed: np.ndarray, candidates: list
     solver = HandSolver(hand, layout.place(hand)[0])
     m = len(layout)
     seen = np.isfinite(observed[..., 0]).sum(axis=1)
-    found = []
+    tried = []  # (slot, start, stop, labels, stack (1 + L, k, M, 3): 0 as labeled, then each label taken)
     for slot, start, stop in candidates:
         frames = np.arange(start, stop)
         frames = frames[(seen[frames] >= min(SEEN, m - 1)) & np.isfinite(positions[frames, slot, 0])]
@@ -76,13 +76,24 @@ def better_holders(positions: np.ndarray, observed: np.ndarray, candidates: list
         base = observed[frames]
         # Labels held in most of these frames: the piece would take them over.
         labels = np.flatnonzero(np.isfinite(base[..., 0]).mean(axis=0) >= 0.5)
-        stack = np.repeat(base[None], len(labels) + 1, axis=0)  # (1 + L, k, M, 3): 0 as labeled
+        if not len(labels):
+            continue
+        stack = np.repeat(base[None], len(labels) + 1, axis=0)
         stack[np.arange(1, len(labels) + 1), :, labels] = positions[frames, slot]
-        flat = stack.reshape(-1, m, 3)
-        residuals = solver.evaluate(solver.cold_start(flat), flat).residuals.reshape(len(labels) + 1, len(frames), m)
+        tried.append((slot, start, stop, labels, stack))
+    if not tried:
+        return []
+    # Every piece's hypotheses in one solve: its chunks run side by side.
+    flat = np.concatenate([stack.reshape(-1, m, 3) for *_, stack in tried])
+    residuals = solver.evaluate(solver.cold_start(flat), flat).residuals
+    found = []
+    at = 0
+    for slot, start, stop, labels, stack in tried:
+        own = residuals[at:at + stack.shape[0] * stack.shape[1]].reshape(stack.shape[:3])
+        at += stack.shape[0] * stack.shape[1]
         with np.errstate(invalid="ignore"):
-            rms = np.median(np.sqrt(np.nanmean(residuals ** 2, axis=2)), axis=1)
-        if not len(labels) or not np.isfinite(rms).all():
+            rms = np.median(np.sqrt(np.nanmean(own ** 2, axis=2)), axis=1)
+        if not np.isfinite(rms).all():
             continue
         best = int(np.argmin(rms[1:]))
         if rms[1 + best] <= min(MARGIN * rms[0], rms[0] - MIN_GAIN):

@@ -16,13 +16,18 @@ structure (a marker moves with the global transform and its own digit's few join
 a dense ``J^T J``), and the 26 x 26 systems are solved by one batched Cholesky
 (:func:`solve_spd`), not LAPACK's per-matrix ``gesv``, which a threaded BLAS made slow, load
 dependent, and its results dependent on the thread count. A frame's fit does not depend on the
-batch it is solved in (beyond rounding), nor on the thread count.
+batch it is solved in (beyond rounding), nor on the thread count. Cold starts of many frames at
+once (the template hand's checks of a sparse labeling try dozens of hypotheses) are cut into
+chunks of :data:`CHUNK_FRAMES` frames solved side by side in threads (numpy releases the GIL in
+its loops): the cut is fixed, so that the rounding is the same on any machine.
 """
 
 from __future__ import annotations
 
 import copy
+import os
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +48,16 @@ from .skin import Binding
 GATE = 0.008
 #: Fewest visible markers a frame needs to be solved at all.
 MIN_MARKERS = 4
+
+#: Frames one thread cold-starts at once: a fixed cut, never one made from the thread count.
+CHUNK_FRAMES = 256
+
+
+def _workers() -> int:
+    """Threads for chunks of frames: the cores, capped by ``MOCAP_AUTOLABEL_THREADS`` where several
+    processes share them (``batch --jobs``), at most 8."""
+    return max(1, min(int(os.environ.get("MOCAP_AUTOLABEL_THREADS") or os.cpu_count() or 1), 8))
+
 
 #: The poses a cold start tries (joint angles, radians).
 _COLD_POSES = np.stack([CANONICAL_POSES[name] for name in ("relaxed", "flat", "fist")])
@@ -478,8 +493,25 @@ class HandSolver:
         return self._cold_start(observed)[0]
 
     def _cold_start(self, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`cold_start`'s poses and their cost (sum of squared residuals) ``(F,)``."""
+        """:meth:`cold_start`'s poses and their cost (sum of squared residuals) ``(F,)``: chunks of
+        :data:`CHUNK_FRAMES` frames, side by side in threads."""
         n = len(observed)
+        workers = _workers()
+        if n <= CHUNK_FRAMES or workers == 1:
+            return self._cold_start_chunks(observed)
+        self._sparse()  # the index arrays once, before the threads share them
+        chunks = [observed[a:a + CHUNK_FRAMES] for a in range(0, n, CHUNK_FRAMES)]
+        with ThreadPoolExecutor(min(workers, len(chunks))) as pool:
+            solved = list(pool.map(self._cold_start_chunks, chunks))
+        return np.concatenate([p for p, _ in solved]), np.concatenate([c for _, c in solved])
+
+    def _cold_start_chunks(self, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_cold_start` of one batch of frames; longer than :data:`CHUNK_FRAMES`, chunk by chunk
+        (the same cut as the threads make)."""
+        n = len(observed)
+        if n > CHUNK_FRAMES:
+            solved = [self._cold_start_chunks(observed[a:a + CHUNK_FRAMES]) for a in range(0, n, CHUNK_FRAMES)]
+            return np.concatenate([p for p, _ in solved]), np.concatenate([c for _, c in solved])
         seen = np.isfinite(observed).all(axis=-1)
         wts = np.where(self._rigid, 1.0, 0.3)[None] * seen  # (F, M)
         starts = []
