@@ -25,7 +25,6 @@ its loops): the cut is fixed, so that the rounding is the same on any machine.
 from __future__ import annotations
 
 import copy
-import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -41,6 +40,7 @@ from ..rotations import (
     rotvec_to_matrix,
 )
 from ..synth.poses import CANONICAL_POSES
+from ..threads import worker_threads
 from .skeleton import DOF_INDEX, FINGERS, N_DOF, PARENTS, POSE_LIMITS, HandModel
 from .skin import Binding
 
@@ -51,12 +51,6 @@ MIN_MARKERS = 4
 
 #: Frames one thread cold-starts at once: a fixed cut, never one made from the thread count.
 CHUNK_FRAMES = 256
-
-
-def _workers() -> int:
-    """Threads for chunks of frames: the cores, capped by ``MOCAP_AUTOLABEL_THREADS`` where several
-    processes share them (``batch --jobs``), at most 8."""
-    return max(1, min(int(os.environ.get("MOCAP_AUTOLABEL_THREADS") or os.cpu_count() or 1), 8))
 
 
 #: The poses a cold start tries (joint angles, radians).
@@ -495,23 +489,21 @@ class HandSolver:
     def _cold_start(self, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`cold_start`'s poses and their cost (sum of squared residuals) ``(F,)``: chunks of
         :data:`CHUNK_FRAMES` frames, side by side in threads."""
-        n = len(observed)
-        workers = _workers()
-        if n <= CHUNK_FRAMES or workers == 1:
-            return self._cold_start_chunks(observed)
-        self._sparse()  # the index arrays once, before the threads share them
-        chunks = [observed[a:a + CHUNK_FRAMES] for a in range(0, n, CHUNK_FRAMES)]
-        with ThreadPoolExecutor(min(workers, len(chunks))) as pool:
-            solved = list(pool.map(self._cold_start_chunks, chunks))
+        chunks = [observed[a:a + CHUNK_FRAMES] for a in range(0, len(observed), CHUNK_FRAMES)] or [observed]
+        threads = min(worker_threads(), len(chunks))
+        if threads > 1:
+            self._sparse()  # the index arrays once, before the threads share them
+            with ThreadPoolExecutor(threads) as pool:
+                solved = list(pool.map(self._cold_start_chunk, chunks))
+        else:
+            solved = [self._cold_start_chunk(chunk) for chunk in chunks]
+        if len(solved) == 1:
+            return solved[0]
         return np.concatenate([p for p, _ in solved]), np.concatenate([c for _, c in solved])
 
-    def _cold_start_chunks(self, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_cold_start` of one batch of frames; longer than :data:`CHUNK_FRAMES`, chunk by chunk
-        (the same cut as the threads make)."""
+    def _cold_start_chunk(self, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_cold_start` of at most :data:`CHUNK_FRAMES` frames."""
         n = len(observed)
-        if n > CHUNK_FRAMES:
-            solved = [self._cold_start_chunks(observed[a:a + CHUNK_FRAMES]) for a in range(0, n, CHUNK_FRAMES)]
-            return np.concatenate([p for p, _ in solved]), np.concatenate([c for _, c in solved])
         seen = np.isfinite(observed).all(axis=-1)
         wts = np.where(self._rigid, 1.0, 0.3)[None] * seen  # (F, M)
         starts = []

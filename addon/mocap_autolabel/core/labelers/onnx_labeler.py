@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import MocapInputError
 from ..layout import Layout, marker_descriptors
+from ..threads import worker_threads
 from .base import Labeler
 from .inputs import prepare_inputs, scores_from_outputs
 
@@ -98,7 +99,7 @@ class OnnxLabeler(Labeler):
         # One thread per run, and batches run side by side: these graphs are many small ops, which
         # parallelise better across batches than inside one.
         # MOCAP_AUTOLABEL_THREADS caps them where several processes share the cores (batch --jobs).
-        self.workers = max(1, min(int(os.environ.get("MOCAP_AUTOLABEL_THREADS") or os.cpu_count() or 1), 8))
+        self.workers = worker_threads()
         options.intra_op_num_threads = 1
         try:
             self.session = ort.InferenceSession(blob, options, providers=["CPUExecutionProvider"])
