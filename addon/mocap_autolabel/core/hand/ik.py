@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +39,7 @@ from ..rotations import (
     rotvec_to_matrix,
 )
 from ..synth.poses import CANONICAL_POSES
-from ..threads import worker_threads
+from ..threads import side_by_side
 from .skeleton import DOF_INDEX, FINGERS, N_DOF, PARENTS, POSE_LIMITS, HandModel
 from .skin import Binding
 
@@ -490,13 +489,8 @@ class HandSolver:
         """:meth:`cold_start`'s poses and their cost (sum of squared residuals) ``(F,)``: chunks of
         :data:`CHUNK_FRAMES` frames, side by side in threads."""
         chunks = [observed[a:a + CHUNK_FRAMES] for a in range(0, len(observed), CHUNK_FRAMES)] or [observed]
-        threads = min(worker_threads(), len(chunks))
-        if threads > 1:
-            self._sparse()  # the index arrays once, before the threads share them
-            with ThreadPoolExecutor(threads) as pool:
-                solved = list(pool.map(self._cold_start_chunk, chunks))
-        else:
-            solved = [self._cold_start_chunk(chunk) for chunk in chunks]
+        self._sparse()  # the index arrays once, before any threads share them
+        solved = side_by_side(self._cold_start_chunk, chunks)
         if len(solved) == 1:
             return solved[0]
         return np.concatenate([p for p, _ in solved]), np.concatenate([c for _, c in solved])

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import MocapInputError
 from ..layout import Layout, marker_descriptors
-from ..threads import worker_threads
+from ..threads import side_by_side, worker_threads
 from .base import Labeler
 from .inputs import prepare_inputs, scores_from_outputs
 
@@ -98,7 +98,6 @@ class OnnxLabeler(Labeler):
         options.log_severity_level = 3
         # One thread per run, and batches run side by side: these graphs are many small ops, which
         # parallelise better across batches than inside one.
-        # MOCAP_AUTOLABEL_THREADS caps them where several processes share the cores (batch --jobs).
         self.workers = worker_threads()
         options.intra_op_num_threads = 1
         try:
@@ -146,12 +145,5 @@ class OnnxLabeler(Labeler):
                         report(finished[0] / len(starts))
 
             run = run_and_report
-        if self.workers > 1 and len(starts) > 1:
-            from concurrent.futures import ThreadPoolExecutor
-
-            with ThreadPoolExecutor(self.workers) as pool:
-                list(pool.map(run, starts))
-        else:
-            for s in starts:
-                run(s)
+        side_by_side(run, starts, self.workers)
         return out
