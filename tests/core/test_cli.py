@@ -165,6 +165,17 @@ def test_train_command_writes_a_model_and_card(tmp_path, capsys):
     assert labeling.n_frames == 1200 and labeling.info["layout"] == "tips3"
 
 
+def test_train_on_a_gpu_that_is_not_there_is_one_line_and_writes_nothing(tmp_path, capsys):
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch==2.13.0)")
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a CUDA GPU: --device cuda trains there")
+    out = tmp_path / "tips3.onnx"
+    assert main(["train", "--layout", "tips3", "-o", str(out), "--steps", "20", "--device", "cuda"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("error: --device cuda:") and "no CUDA GPU" in err[-1]
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("parts", [("c3d", "ezc3d-testFiles", "Vicon.c3d"),
                                    pytest.param(("c3d", "auto-marker-label", "data", "S01_Pronetokneel01_mksrem.c3d"),
                                                 marks=pytest.mark.slow)])

@@ -28,11 +28,17 @@ def _train(args) -> int:
         return EXIT_FAILED
     import dataclasses
 
+    import torch
+
+    if args.device == "cuda" and not torch.cuda.is_available():
+        print(f"error: --device cuda: PyTorch {torch.__version__} sees no CUDA GPU here (train on the CPU without "
+              f"--device, or install a CUDA build of PyTorch)", file=sys.stderr)
+        return EXIT_FAILED
     r = recipe("set", layout.name)
     r = dataclasses.replace(r, seed=args.seed, steps=args.steps or r.steps)
     print(f"training a set model for {layout.name} ({len(layout)} markers) on synthetic frames: {r.steps} steps",
           file=sys.stderr)
-    net, metrics = train(layout, r)
+    net, metrics = train(layout, r, device=args.device)
     try:
         export(net, layout, r, metrics, args.output)
     except OSError as exc:
