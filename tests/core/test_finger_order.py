@@ -146,3 +146,33 @@ def test_two_real_sparse_hands_whose_shape_gave_the_wrong_sides_get_them_put_bac
     ok = take.valid & (truth >= 0) & (per >= 0)
     assert ((truth[ok] < m) == (per[ok] < m)).mean() > 0.9  # each hand's labels on its own side
     assert (labeling.confidence[labeling.label >= 0] < SURE).all()
+
+
+def test_a_stretch_order_never_gives_one_label_to_two_trajectories_of_a_frame():
+    """A stretch's order moves only the trajectories inside it: where the middle tip's piece inside
+    would take the ring label of a trajectory running past the stretch's ends, nothing moves (a
+    han2018 tips + hand cluster take came out with RingTip twice in frames 19-34, and writing it
+    failed: "labeling gives one label to two samples of the same frame")."""
+    from mocap_autolabel.core.labeling import Labeling
+    from mocap_autolabel.core.stages.refine import _reorder
+
+    layout = load_layout("tips5_hand3")
+    groups, m = finger_groups(layout), len(layout)
+    middle, ring = layout.names.index("MiddleTip"), layout.names.index("RingTip")
+    swap = (0, 1, 3, 2, 4)  # middle <-> ring
+
+    def labeling() -> Labeling:  # slot 0: the ring tip over frames 0-39; slot 1: the middle tip over 10-29
+        return Labeling(layout.names, 40, 2, np.array([0, 1]), np.array([0, 10]), np.array([40, 30]),
+                        np.array([ring, middle], dtype=np.int16), np.ones(2, dtype=np.float32),
+                        np.zeros(2, dtype=bool), {})
+
+    lab, facts = labeling(), {}
+    done = _reorder(lab, groups, swap, np.array([False, True]), 0, m, facts, "frames 10-29: ")
+    assert done["moved"] == {} and done["kept_for_overlap"] == {"middle": "ring", "ring": "middle"}
+    assert lab.label.tolist() == [ring, middle] and not facts
+    per = lab.per_sample()
+    assert all(len(set(row[row >= 0].tolist())) == len(row[row >= 0]) for row in per)
+    # Both trajectories in the stretch: the order moves them together.
+    lab = labeling()
+    done = _reorder(lab, groups, swap, np.array([True, True]), 0, m, {}, "")
+    assert lab.label.tolist() == [middle, ring] and done["segments"] == 2

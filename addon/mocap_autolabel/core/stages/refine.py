@@ -238,12 +238,26 @@ def _reorder(labeling: Labeling, groups: list[list[int]], order: tuple[int, ...]
     changed = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
     if (moved & labeling.locked).any():  # a reviewer's label says this finger is right as it is
         return {"kept_for_locks": changed, "moved": {}, "segments": 0}
+    if _held_elsewhere(labeling, new, moved):  # a stretch's trajectory running past it keeps its label
+        return {"kept_for_overlap": changed, "moved": {}, "segments": 0}
     labeling.label = new.astype(labeling.label.dtype)
     labeling.confidence[moved] = np.minimum(labeling.confidence[moved], np.float32(SURE - 1e-3))
     if changed:
         add_warning(facts, f"{where}finger order changed by the template hand's fit ("
                            + ", ".join(f"{a} -> {b}" for a, b in changed.items()) + "): check these fingers")
     return {"moved": changed, "segments": int(moved.sum())}
+
+
+def _held_elsewhere(labeling: Labeling, new: np.ndarray, moved: np.ndarray) -> bool:
+    """Whether a ``moved`` segment's ``new`` label is held by another segment in one of its frames:
+    a stretch's order moves only the segments inside it, and one running past its ends keeps its
+    label, which a moved segment must not take too (one label, one sample a frame)."""
+    for i in np.flatnonzero(moved).tolist():
+        other = np.flatnonzero(new == new[i])
+        other = other[other != i]
+        if ((labeling.start[other] < labeling.stop[i]) & (labeling.start[i] < labeling.stop[other])).any():
+            return True
+    return False
 
 
 def _swap_sides(labeling: Labeling, facts: dict, m: int, sure: float) -> None:
