@@ -13,6 +13,7 @@ from ..hands import HAND_RADIUS, Hands, add_warning, identity_swaps, swap_ranges
 from ..labeling import Labeling
 from ..props import Prop, find_props, prop_mask, rigid_groups
 from ..take import Take
+from ..temporal.voting import Segments, label_conflicts
 from .decide import decide
 from .hands import labeled_handedness
 from .look import look_again
@@ -238,7 +239,11 @@ def _reorder(labeling: Labeling, groups: list[list[int]], order: tuple[int, ...]
     changed = {FINGERS[a]: FINGERS[b] for a, b in enumerate(order) if a != b}
     if (moved & labeling.locked).any():  # a reviewer's label says this finger is right as it is
         return {"kept_for_locks": changed, "moved": {}, "segments": 0}
-    if _held_elsewhere(labeling, new, moved):  # a stretch's trajectory running past it keeps its label
+    # A stretch's order moves only the segments inside it; one running past its ends keeps its
+    # label, which a moved segment must not take too (one label, one sample a frame).
+    labels = len(labeling.names)
+    if label_conflicts(np.where(new >= 0, new, labels), Segments(labeling.slot, labeling.start, labeling.stop),
+                       labels):
         return {"kept_for_overlap": changed, "moved": {}, "segments": 0}
     labeling.label = new.astype(labeling.label.dtype)
     labeling.confidence[moved] = np.minimum(labeling.confidence[moved], np.float32(SURE - 1e-3))
@@ -246,18 +251,6 @@ def _reorder(labeling: Labeling, groups: list[list[int]], order: tuple[int, ...]
         add_warning(facts, f"{where}finger order changed by the template hand's fit ("
                            + ", ".join(f"{a} -> {b}" for a, b in changed.items()) + "): check these fingers")
     return {"moved": changed, "segments": int(moved.sum())}
-
-
-def _held_elsewhere(labeling: Labeling, new: np.ndarray, moved: np.ndarray) -> bool:
-    """Whether a ``moved`` segment's ``new`` label is held by another segment in one of its frames:
-    a stretch's order moves only the segments inside it, and one running past its ends keeps its
-    label, which a moved segment must not take too (one label, one sample a frame)."""
-    for i in np.flatnonzero(moved).tolist():
-        other = np.flatnonzero(new == new[i])
-        other = other[other != i]
-        if ((labeling.start[other] < labeling.stop[i]) & (labeling.start[i] < labeling.stop[other])).any():
-            return True
-    return False
 
 
 def _swap_sides(labeling: Labeling, facts: dict, m: int, sure: float) -> None:

@@ -273,7 +273,7 @@ def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[i
     var_seg, var_lab = np.nonzero(allowed)
     # Shortcut: if every trajectory's best labels are already exclusive, that is optimal.
     best = _best_chains(np.where(allowed, weights, -np.inf), switch)
-    if not _conflicts(best, segments, m):
+    if not label_conflicts(best, segments, m):
         return np.where(best == m, NULL, best)
     # Segments interact only through a shared candidate label over overlapping frames, or as
     # pieces of one trajectory: solve just the groups of interacting segments that hold a clash;
@@ -617,8 +617,8 @@ def _clash_cuts(weights: np.ndarray, labels: np.ndarray, segments: Segments,
     return cuts
 
 
-def _conflicts(labels: np.ndarray, segments: Segments, m: int) -> bool:
-    """True if two overlapping segments share a real label."""
+def label_conflicts(labels: np.ndarray, segments: Segments, m: int) -> bool:
+    """True if two overlapping segments share a real label (``labels`` ``(S,)``; ``m`` or more: null)."""
     named = np.flatnonzero(labels < m)
     order = named[np.lexsort((segments.start[named], labels[named]))]
     # Sorted by start within a label; an overlap exists iff some start is before the running
