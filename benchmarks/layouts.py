@@ -1,6 +1,7 @@
 """Any marker set, no training: the shipped layout-conditioned ``set`` model on sparse finger sets.
 
-(a) han2018_dense19 Users 1-2 sequences (after each user's first 10, which fit ``gmm``) reduced to
+(a) han2018_dense19 Users 1-2 sequences (after each user's first 10, which fit ``gmm``; with ``--limit``,
+    that many spread evenly over each user's recording: its first takes are easier than the rest) reduced to
     sparse sets of its own markers and corrupted exactly as the temporal benchmark corrupts its raw
     takes (``corrupt_take``, seed 1000 * user + index). Each set is a layout built from han19's own
     entries, as a user would write it. The ``*MCP`` markers sit in the band of the proximal phalanx
@@ -8,7 +9,8 @@
     positions the model never saw.
 (b) The real qualisys_glove13 recording reduced to two subsets (labels stripped, every slot cut at
     its gaps, the body and pillow markers kept as distractors), as the temporal benchmark does.
-(c) Two hands: both files of each han2018 sequence of at least 100 frames as one take, per set.
+(c) Two hands: both files of each han2018 sequence of at least 100 frames as one take, per set (spread
+    over the recording as in (a)).
 (d) Speed and start: a 10,000-frame synthetic take of a sparse layout written as a new TOML, through
     the ``label`` CLI, against a built-in layout.
 
@@ -92,6 +94,13 @@ def has_hand_markers(layout: Layout) -> bool:
     return sum(m.bone == "palm" for m in layout.markers) >= 3
 
 
+def spread(count: int, limit: int | None) -> np.ndarray:
+    """Indices of ``limit`` of ``count`` items spread evenly over them (all where None or more)."""
+    if limit is None or limit >= count:
+        return np.arange(count)
+    return np.unique(np.linspace(0, count - 1, limit).round().astype(int))
+
+
 def han_cases(han19: Layout, names: list[str], limit: int | None) -> list[Case]:
     from datasets import han2018_sequences
 
@@ -100,7 +109,8 @@ def han_cases(han19: Layout, names: list[str], limit: int | None) -> list[Case]:
     for u, user in enumerate(("User1", "User2")):
         seqs = [s[:, cols] for s in han2018_sequences(han19, user=user)]
         fit = np.concatenate(seqs[:10])
-        for i, s in enumerate(seqs[10:][:limit]):
+        for i in spread(len(seqs) - 10, limit):
+            s = seqs[10 + i]
             take, truth, _ = corrupt_take(s, 120.0, seed=1000 * u + i)
             cases.append(Case(take, truth, fit, s[0]))
     return cases
@@ -168,7 +178,9 @@ def run_two_hands(han19: Layout, names: list[str], name: str, limit: int | None)
     cols = [han19.names.index(n) for n in names]
     m = len(layout)
     rows, sides = [], []
-    for _, seed, a, b in han_pairs(han19)[:limit]:
+    pairs = han_pairs(han19)
+    for j in spread(len(pairs), limit):
+        _, seed, a, b = pairs[j]
         take, truth, _ = corrupt_take(np.concatenate([a[:, cols], b[:, cols]], axis=1), 120.0, seed=seed)
         lab = label_take(take, layout)
         s = score_labeling(lab.per_sample(), truth, take.valid, 2 * m).as_dict()

@@ -12,6 +12,7 @@ from mocap_autolabel.core.hand.finger_order import (
     checked_spans,
     finger_groups,
     label_map,
+    labeler_loss,
 )
 from mocap_autolabel.core.layout import load_layout
 from mocap_autolabel.core.pipeline import label_take
@@ -45,6 +46,44 @@ def test_a_wrong_finger_order_is_put_back_and_a_right_one_kept(order):
     restored[:, label_map(groups, back, m)] = wrong
     assert np.array_equal(restored, right, equal_nan=True)
     assert facts["chosen_mm"] <= 0.9 * facts["residual_mm"]
+
+
+def _scores_for(observed: np.ndarray, sure: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-sample labels ``(F, M)`` (slot j holds label j where seen), slots ``(F, M)`` and log-probability
+    scores ``(F, M, M + 1)`` of a labeler sure of those labels, or one that cannot tell the labels apart."""
+    frames, m, _ = observed.shape
+    seen = np.isfinite(observed[..., 0])
+    per = np.where(seen, np.arange(m), -1)
+    slots = np.where(seen, np.arange(m), -1).astype(np.int32)
+    scores = np.full((frames, m, m + 1), np.log(1.0 / (m + 1)), dtype=np.float32)
+    if sure:
+        scores[:] = -20.0
+        scores[:, np.arange(m), np.arange(m)] = 0.0
+    return per, slots, scores
+
+
+def test_the_labelers_word_keeps_an_order_it_is_sure_of_and_gives_way_where_it_cannot_tell():
+    layout = load_layout("tips5_hand3")
+    groups, m = finger_groups(layout), len(layout)
+    right = true_markers(synthesize(layout, 300, seed=5), m)
+    swap = (1, 0, 2, 3, 4)
+    wrong = np.full_like(right, np.nan)
+    wrong[:, label_map(groups, swap, m)] = right
+    per, slots, scores = _scores_for(wrong, sure=False)
+    unsure = labeler_loss(scores, slots, per, m, 0, groups)
+    assert unsure.shape == (len(candidate_orders()),) and np.allclose(unsure, 0.0)
+    back, _ = checked_order(wrong, layout, groups, lost=unsure)
+    assert back == checked_order(wrong, layout, groups)[0] != (0, 1, 2, 3, 4)  # the fit alone decides
+    per, slots, scores = _scores_for(wrong, sure=True)
+    sure = labeler_loss(scores, slots, per, m, 0, groups)
+    assert sure[0] == 0.0 and (sure[1:] > 0).all()
+    moved = np.isfinite(wrong[:, groups[0][0], 0]).sum() + np.isfinite(wrong[:, groups[1][0], 0]).sum()
+    assert sure[candidate_orders().index(swap)] == pytest.approx(20.0 * moved)  # thumb and index both moved
+    kept, facts = checked_order(wrong, layout, groups, lost=sure)
+    assert kept == (0, 1, 2, 3, 4) and facts["chosen_mm"] == facts["residual_mm"]
+    # A second hand's block of labels: each finger's score is the better hand's (sides named after scoring).
+    two = np.concatenate([np.full_like(scores, -30.0)[..., :m], scores], axis=2)
+    assert np.allclose(labeler_loss(two, slots, per, m, 0, groups), sure)
 
 
 def test_two_hands_sides_the_wrong_way_round_are_put_back():

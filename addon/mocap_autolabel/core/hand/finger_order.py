@@ -47,6 +47,12 @@ SPANS = 4
 SIDES_CHECKED_BELOW = 0.99
 #: Markers on the hand's back or wrist (bones ``palm`` and ``*_meta``) that make the hand frame.
 HAND_MARKERS = 3
+#: The labeler's word in the whole take's check: the log-likelihood (nats) its scores lose when the
+#: hand's labeled samples take another order's labels, per frame the template is solved on, counts
+#: this much against that order's log residual ratio. Without it the template alone moves orders
+#: the labeler was sure of; fitted on the han2018 tips + hand cluster takes the layouts benchmark
+#: leaves out (``benchmarks/reports/layouts.md``).
+EVIDENCE_WEIGHT = 0.03
 
 
 def _role(marker: Marker) -> str:
@@ -132,34 +138,65 @@ def order_residuals(observed: np.ndarray, layout: Layout, groups: list[list[int]
         return np.array([np.median(r[np.isfinite(r)]) if np.isfinite(r).any() else np.inf for r in residuals])
 
 
-def _chosen(median: np.ndarray, margin: float = MARGIN) -> int:
-    """The candidate order kept: the best, where it is clearly better than the labeling's own (index 0)."""
-    best = int(np.argmin(median))  # the first of equals: the labeling's own order wins ties
-    return best if median[best] <= margin * median[0] else 0
+def labeler_loss(scores: np.ndarray, slots: np.ndarray, per: np.ndarray, m: int, hand: int,
+                 groups: list[list[int]]) -> np.ndarray:
+    """float ``(len(candidate_orders()),)``: the log-likelihood (nats, >= 0) the labeler's ``scores``
+    ``(F, K, labels + 1)`` (log-probabilities of the packed observations whose take slots are
+    ``slots`` ``(F, K)``, -1 for padding) lose when hand ``hand``'s labeled samples (per-sample
+    labels ``per`` ``(F, P)``, ``m`` a hand) take each candidate order's labels instead of their own.
+    Each finger label's score is the better of the hands' (the sides may have been named after
+    scoring, swapping the hands' label blocks)."""
+    f, k = np.nonzero(slots >= 0)
+    label = per[f, slots[f, k]] - hand * m
+    mine = (label >= 0) & (label < m)
+    f, k, label = f[mine], k[mine], label[mine]
+    hands = max(1, (scores.shape[2] - 1) // m)
+    by_label = np.max(scores[f, k, :hands * m].reshape(len(f), hands, m), axis=1).astype(np.float64)
+    by_label = np.maximum(by_label, -1e4)  # a constraint's -inf: a large finite loss
+    rows = np.arange(len(f))
+    total = np.array([by_label[rows, label_map(groups, order, m)[label]].sum() for order in candidate_orders()])
+    return np.maximum(total[0] - total, 0.0)
 
 
-def _decided(median: np.ndarray, side: str, margin: float = MARGIN) -> tuple[tuple[int, ...], dict]:
+def _chosen(median: np.ndarray, margin: float = MARGIN, lost: np.ndarray | None = None) -> int:
+    """The candidate order kept: the best, where it is clearly better than the labeling's own (index
+    0); ``lost`` (nats per solved frame, :func:`labeler_loss`) counts against each order too."""
+    if lost is None or not np.isfinite(median[0]) or median[0] <= 0:
+        best = int(np.argmin(median))  # the first of equals: the labeling's own order wins ties
+        return best if median[best] <= margin * median[0] else 0
+    with np.errstate(divide="ignore"):
+        cost = np.log(median / median[0]) + EVIDENCE_WEIGHT * lost
+    best = int(np.argmin(cost))
+    return best if cost[best] <= np.log(margin) else 0
+
+
+def _decided(median: np.ndarray, side: str, margin: float = MARGIN,
+             lost: np.ndarray | None = None) -> tuple[tuple[int, ...], dict]:
     """The order kept (:func:`_chosen`) from :func:`order_residuals`' ``median``, and its facts: the
     side, the median residuals in mm of the labeling's order and the chosen one."""
-    chosen = _chosen(median, margin)
+    chosen = _chosen(median, margin, lost)
     return candidate_orders()[chosen], {"side": side, "residual_mm": round(float(median[0]) * 1000, 2),
                                         "chosen_mm": round(float(median[chosen]) * 1000, 2)}
 
 
 def checked_order(observed: np.ndarray, layout: Layout, groups: list[list[int]],
-                  side: str | None = None) -> tuple[tuple[int, ...], dict]:
+                  side: str | None = None, lost: np.ndarray | None = None) -> tuple[tuple[int, ...], dict]:
     """The finger order the template hand fits best for one hand's labeled markers ``observed``
     ``(F, M, 3)`` (metres, NaN where unlabeled): the labeling's own unless another is clearly better
     (:data:`MARGIN`); and the facts (side, median residuals in mm of the labeling's order and the
     chosen one). ``side``: the hand's, where known (else the side the template fits better in the
-    labeling's own order)."""
+    labeling's own order). ``lost``: what each order costs the labeler's scores
+    (:func:`labeler_loss`, nats), weighed against the fit (:data:`EVIDENCE_WEIGHT`)."""
     identity = tuple(range(len(groups)))
     try:
         side = side or detect_side(observed, layout)
     except ValueError:  # no frame the template can be solved on
         return identity, {}
     median = order_residuals(observed, layout, groups, side)
-    return (identity, {}) if median is None else _decided(median, side)
+    if median is None:
+        return identity, {}
+    per_frame = None if lost is None else lost / len(_well_seen(observed, FRAMES))
+    return _decided(median, side, lost=per_frame)
 
 
 def checked_sides(observed: list[np.ndarray], layout: Layout, groups: list[list[int]],

@@ -179,7 +179,14 @@ def finger_order_stage(run: LabelRun) -> None:
     checked_spans`). Two hands whose sides were read off their markers' shape with doubt are checked
     the other way round too: a permuted labeling can turn that shape. A reviewer's locked label is
     never moved: a hand whose new order would move one keeps its own, and locks keep the sides."""
-    from ..hand.finger_order import SIDES_CHECKED_BELOW, checked_order, checked_sides, checked_spans, finger_groups
+    from ..hand.finger_order import (
+        SIDES_CHECKED_BELOW,
+        checked_order,
+        checked_sides,
+        checked_spans,
+        finger_groups,
+        labeler_loss,
+    )
     from ..review import SURE
     from .hands import hand_markers
 
@@ -202,7 +209,8 @@ def finger_order_stage(run: LabelRun) -> None:
             observed = observed[::-1]
             found = found[::-1]
     else:
-        found = [checked_order(o, run.layout, groups, side) for o, side in zip(observed, sides)]
+        lost = [labeler_loss(run.scores, run.batch.slots, per, m, h, groups) for h in range(count)]
+        found = [checked_order(o, run.layout, groups, side, cost) for o, side, cost in zip(observed, sides, lost)]
     checked = []
     for h, (side, (order, fit)) in enumerate(zip(sides, found)):
         if not fit:
