@@ -1,7 +1,7 @@
 """Any marker set, no training: the shipped layout-conditioned ``set`` model on sparse finger sets.
 
 (a) han2018_dense19 Users 1-2 sequences (after each user's first 10, which fit ``gmm``; with ``--limit``,
-    that many spread evenly over each user's recording: its first takes are easier than the rest) reduced to
+    that many spread evenly over each user's recording: its first takes alone are not typical of it) reduced to
     sparse sets of its own markers and corrupted exactly as the temporal benchmark corrupts its raw
     takes (``corrupt_take``, seed 1000 * user + index). Each set is a layout built from han19's own
     entries, as a user would write it. The ``*MCP`` markers sit in the band of the proximal phalanx

@@ -111,6 +111,15 @@ def test_a_stretch_of_the_take_in_a_wrong_order_is_found_and_the_rest_left():
     spans = checked_spans(wrong, layout, groups, facts["side"], np.array([0, 120, 180, 300]))
     assert [(a, b, order) for a, b, order, _ in spans] == [(120, 180, swap)]
     assert checked_spans(right, layout, groups, facts["side"], np.array([0, 120, 180, 300])) == []
+    # The labeler's word: one that cannot tell the fingers apart leaves it to the fit, one sure of the
+    # stretch's labels keeps them.
+    per, slots, scores = _scores_for(wrong, sure=False)
+    unsure = checked_spans(wrong, layout, groups, facts["side"], np.array([0, 120, 180, 300]),
+                           lambda a, b: labeler_loss(scores[a:b], slots[a:b], per[a:b], m, 0, groups))
+    assert [(a, b, order) for a, b, order, _ in unsure] == [(120, 180, swap)]
+    per, slots, scores = _scores_for(wrong, sure=True)
+    assert checked_spans(wrong, layout, groups, facts["side"], np.array([0, 120, 180, 300]),
+                         lambda a, b: labeler_loss(scores[a:b], slots[a:b], per[a:b], m, 0, groups)) == []
     # too short a stretch is not judged on its own
     short = right.copy()
     short[120:130][:, label_map(groups, swap, m)] = right[120:130]

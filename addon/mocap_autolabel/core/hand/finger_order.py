@@ -15,6 +15,7 @@ without a hand frame, five tips alone fit several orders about equally well.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 
 import numpy as np
 
@@ -34,8 +35,9 @@ MARGIN = 0.9
 #: many frames long, is checked on its own too (:func:`checked_spans`): the vote may hold a wrong
 #: order over a few trajectories' pieces only ...
 SPAN_FRAMES = 16
-#: ... solved on this many of its frames, an order replacing its own where its median residual is
-#: at most this share of the labeling's (fewer frames than the whole take's check: a wider margin).
+#: ... solved on this many of its frames; weighed with the labeler's word (:data:`EVIDENCE_WEIGHT`)
+#: against :data:`MARGIN` as the whole take is. The template alone, an order replaces the stretch's
+#: where its median residual is at most this share of the labeling's (fewer frames: a wider margin).
 SPAN_SAMPLE = 8
 SPAN_MARGIN = 0.7
 #: Stretches checked per hand at most, the longest first: a bound on the work (a long take's
@@ -47,12 +49,15 @@ SPANS = 4
 SIDES_CHECKED_BELOW = 0.99
 #: Markers on the hand's back or wrist (bones ``palm`` and ``*_meta``) that make the hand frame.
 HAND_MARKERS = 3
-#: The labeler's word in the whole take's check: the log-likelihood (nats) its scores lose when the
-#: hand's labeled samples take another order's labels, per frame the template is solved on, counts
-#: this much against that order's log residual ratio. Without it the template alone moves orders
-#: the labeler was sure of; fitted on the han2018 tips + hand cluster takes the layouts benchmark
-#: leaves out (``benchmarks/reports/layouts.md``).
+#: The labeler's word in the whole take's and each stretch's check: the log-likelihood (nats) its
+#: scores lose when the hand's labeled samples take another order's labels, per frame the template
+#: is solved on, counts this much against that order's log residual ratio. Without it the template
+#: alone moves orders the labeler was sure of; fitted on han2018 tips + hand cluster takes (the
+#: closing notes of issue 46 give the figures).
 EVIDENCE_WEIGHT = 0.03
+#: Residuals below this (metres, under a marker's noise) count as this in that ratio: a perfect fit
+#: is no infinite evidence.
+RESIDUAL_FLOOR = 0.0005
 
 
 def _role(marker: Marker) -> str:
@@ -164,8 +169,8 @@ def _chosen(median: np.ndarray, margin: float = MARGIN, lost: np.ndarray | None 
     if lost is None or not np.isfinite(median[0]) or median[0] <= 0:
         best = int(np.argmin(median))  # the first of equals: the labeling's own order wins ties
         return best if median[best] <= margin * median[0] else 0
-    with np.errstate(divide="ignore"):
-        cost = np.log(median / median[0]) + EVIDENCE_WEIGHT * lost
+    floored = np.maximum(median, RESIDUAL_FLOOR)
+    cost = np.log(floored / floored[0]) + EVIDENCE_WEIGHT * lost
     best = int(np.argmin(cost))
     return best if cost[best] <= np.log(margin) else 0
 
@@ -220,17 +225,24 @@ def checked_sides(observed: list[np.ndarray], layout: Layout, groups: list[list[
 
 
 def checked_spans(observed: np.ndarray, layout: Layout, groups: list[list[int]], side: str,
-                  bounds: np.ndarray) -> list[tuple[int, int, tuple[int, ...], dict]]:
+                  bounds: np.ndarray, lost_in: Callable[[int, int], np.ndarray] | None = None,
+                  ) -> list[tuple[int, int, tuple[int, ...], dict]]:
     """Stretches of one hand's labeled markers ``observed`` ``(F, M, 3)`` whose finger order the
-    template hand fits clearly better otherwise (:data:`SPAN_MARGIN`): ``(start, stop, order,
-    facts)`` for each stretch between consecutive ``bounds`` (sorted frames where the hand's labeled
-    trajectories start or end) of at least :data:`SPAN_FRAMES` frames, the :data:`SPANS` longest."""
+    template hand fits clearly better otherwise: ``(start, stop, order, facts)`` for each stretch
+    between consecutive ``bounds`` (sorted frames where the hand's labeled trajectories start or end)
+    of at least :data:`SPAN_FRAMES` frames, the :data:`SPANS` longest. ``lost_in(start, stop)``: what
+    each order costs the labeler's scores in those frames (:func:`labeler_loss`), weighed against the
+    fit as for the whole take; without it the template alone decides (:data:`SPAN_MARGIN`)."""
     spans = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if b - a >= SPAN_FRAMES]
+    margin = SPAN_MARGIN if lost_in is None else MARGIN
     out = []
     for start, stop in sorted(sorted(spans, key=lambda ab: ab[0] - ab[1])[:SPANS]):
         part = np.full_like(observed, np.nan)
         part[start:stop] = observed[start:stop]
         median = order_residuals(part, layout, groups, side, frames=SPAN_SAMPLE)
-        if median is not None and _chosen(median, SPAN_MARGIN):
-            out.append((start, stop, *_decided(median, side, SPAN_MARGIN)))
+        if median is None:
+            continue
+        lost = None if lost_in is None else lost_in(start, stop) / len(_well_seen(part, SPAN_SAMPLE))
+        if _chosen(median, margin, lost):
+            out.append((start, stop, *_decided(median, side, margin, lost)))
     return out

@@ -221,9 +221,15 @@ def finger_order_stage(run: LabelRun) -> None:
         if checked[-1].get("kept_for_locks"):
             continue  # the reviewer's locks say which order is right
         # Then each stretch between the hand's trajectories' starts and ends on its own.
-        observed = hand_markers(run.take, labeling.per_sample(), m, h)
+        now = labeling.per_sample()
+        observed = hand_markers(run.take, now, m, h)
         bounds = np.unique(np.concatenate([[0, labeling.n_frames], labeling.start[mine], labeling.stop[mine]]))
-        for start, stop, span_order, span_fit in checked_spans(observed, run.layout, groups, fit["side"], bounds):
+
+        def lost_in(start: int, stop: int, h: int = h, now: np.ndarray = now) -> np.ndarray:
+            return labeler_loss(run.scores[start:stop], run.batch.slots[start:stop], now[start:stop], m, h, groups)
+
+        for start, stop, span_order, span_fit in checked_spans(observed, run.layout, groups, fit["side"], bounds,
+                                                               lost_in):
             inside = mine & (labeling.start >= start) & (labeling.stop <= stop)
             first = start + run.take.first_frame
             checked.append(_reorder(labeling, groups, span_order, inside, h, m, facts,
