@@ -156,8 +156,9 @@ def labeler_loss(scores: np.ndarray, slots: np.ndarray, per: np.ndarray, m: int,
     mine = (label >= 0) & (label < m)
     f, k, label = f[mine], k[mine], label[mine]
     hands = max(1, (scores.shape[2] - 1) // m)
-    by_label = np.max(scores[f, k, :hands * m].reshape(len(f), hands, m), axis=1).astype(np.float64)
-    by_label = np.maximum(by_label, -1e4)  # a constraint's -inf: a large finite loss
+    by_label = np.fmax.reduce(scores[f, k, :hands * m].reshape(len(f), hands, m), axis=1).astype(np.float64)
+    # A constraint's -inf, or a sample never offered to the hand (NaN): a large finite loss.
+    by_label = np.maximum(np.nan_to_num(by_label, nan=-1e4), -1e4)
     rows = np.arange(len(f))
     total = np.array([by_label[rows, label_map(groups, order, m)[label]].sum() for order in candidate_orders()])
     return np.maximum(total[0] - total, 0.0)
