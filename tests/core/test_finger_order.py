@@ -54,7 +54,7 @@ def _scores_for(observed: np.ndarray, sure: bool) -> tuple[np.ndarray, np.ndarra
     frames, m, _ = observed.shape
     seen = np.isfinite(observed[..., 0])
     per = np.where(seen, np.arange(m), -1)
-    slots = np.where(seen, np.arange(m), -1).astype(np.int32)
+    slots = per.astype(np.int32)  # observation j of a frame is take slot j
     scores = np.full((frames, m, m + 1), np.log(1.0 / (m + 1)), dtype=np.float32)
     if sure:
         scores[:] = -20.0
