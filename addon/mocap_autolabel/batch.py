@@ -946,6 +946,7 @@ def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings
         context = multiprocessing.get_context("spawn")
         while todo:
             broken = []
+            others = set(multiprocessing.active_children())
             with ProcessPoolExecutor(settings.jobs, mp_context=context, initializer=_pool_init,
                                      initargs=(os.getpid(),)) as pool:
                 pending = {}
@@ -961,6 +962,7 @@ def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings
                             rows.append(_finish(bar, _read_report(out_dir, name)))
                         except BrokenProcessPool:
                             broken.append((path, name))
+                _end_workers(pool, set(multiprocessing.active_children()) - others)
             todo = []
             for path, name in broken:
                 if tries[name] < POOL_TRIES:
@@ -970,6 +972,22 @@ def _run_pool(todo: list[tuple[str, str]], out_dir: str, settings: BatchSettings
                                                            f"each of {POOL_TRIES} tries (killed, or out of memory)",
                                                            run)))
     return rows
+
+
+def _end_workers(pool: ProcessPoolExecutor, workers: set) -> None:
+    """End a pool whose every take is reported: its workers hold nothing more of the batch's.
+
+    A worker killed (out of memory, by a user) right after handing back the last result still held the
+    result pipe's lock, and the pool's graceful shutdown then waits for ever on another worker that waits
+    on that lock to say it is leaving (the pool only ends its workers by force when a death comes before
+    its last result). Ending them by force here, as the pool itself does with a broken pool, cannot lose
+    work: every output is written and every report read.
+    """
+    pool.shutdown(wait=False, cancel_futures=True)
+    for worker in workers:
+        worker.terminate()
+    for worker in workers:
+        worker.join()
 
 
 def _read_report(out_dir: str, name: str) -> dict:

@@ -136,11 +136,14 @@ if flag:
     _replace, _send_bytes = os.replace, connection.Connection._send_bytes
     def replace(src, dst, *args, **kwargs):
         _replace(src, dst, *args, **kwargs)
-        if str(dst).endswith("synth1.report.json"):
-            wrote.append(True)
+        if os.environ["MOCAP_TEST_KILL_AFTER"] == "synth1":
+            wrote.extend([True] * str(dst).endswith("synth1.report.json"))
+        elif str(dst).endswith(".report.json"):  # "last": the worker that wrote the batch's last report
+            folder = os.path.dirname(str(dst))
+            wrote.extend([True] * (sum(f.endswith(".report.json") for f in os.listdir(folder)) == 3))
     def send_bytes(self, buf):
-        # The worker that finished synth1 dies handing back its result, as early as the pipe's real writes
-        # allow: after the length of a message over 16 kB (written apart from its body), else after it all.
+        # That worker dies handing back its result, as early as the pipe's real writes allow: after the
+        # length of a message over 16 kB (written apart from its body), else after it all, lock still held.
         if wrote and b"_ResultItem" in bytes(buf[:200]) and not os.path.exists(flag):
             open(flag, "w").close()
             if len(buf) > 16384:
@@ -153,10 +156,13 @@ if flag:
 '''
 
 
-def test_a_worker_killed_handing_back_a_result_does_not_hang_the_batch(tmp_path):
-    """The flaky hang of the random kills above, made certain: a worker killed in the middle of the message
-    that hands back a take's report (25 kB: two writes) left the pool's manager thread waiting for the rest
-    of it, and the other worker waiting on the pipe's lock, for ever."""
+@pytest.mark.parametrize("after", ["synth1", "last"])
+def test_a_worker_killed_handing_back_a_result_does_not_hang_the_batch(tmp_path, after):
+    """The flaky hangs of the random kills above, made certain. ``synth1``: a worker killed in the middle of
+    the message that hands back a take's report (25 kB: two writes) left the pool's manager thread waiting
+    for the rest of it, and the other worker waiting on the pipe's lock, for ever. ``last``: a worker killed
+    right after handing back the batch's last result, its lock on the pipe still held: the pool's graceful
+    shutdown waited for ever on the other worker, which waited on that lock to say it was leaving."""
     takes = tmp_path / "takes"
     _synthetic(takes, 3, frames=3000)  # synth1's report is the largest
     hook = tmp_path / "hook"
@@ -165,7 +171,7 @@ def test_a_worker_killed_handing_back_a_result_does_not_hang_the_batch(tmp_path)
     flag = tmp_path / "killed"
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(hook), str(ROOT / "addon")]),
-               MOCAP_TEST_KILL_IN_RESULT=str(flag))
+               MOCAP_TEST_KILL_IN_RESULT=str(flag), MOCAP_TEST_KILL_AFTER=after)
     proc = subprocess.Popen([sys.executable, "-m", "mocap_autolabel", "batch", str(takes), "-o", str(out),
                              "--jobs", "2", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=env, start_new_session=True)
