@@ -327,6 +327,36 @@ def test_a_take_labeled_with_the_wrong_layout_names_the_right_one(glove, chosen)
     assert layout_doubt(take, load_layout(glove), right) is None
 
 
+def test_a_quick_reading_settles_clashes_by_the_relaxation_and_the_layout_check_reads_quickly(monkeypatch):
+    """On another layout's markers a clash's integer programme could take minutes (a 400-frame take: 3 min
+    within the node bound, all in HiGHS's root); ``exact_pairs=0`` settles every clash by the rounded
+    relaxation, and the layout check reads the other layouts so."""
+    import mocap_autolabel.core.temporal.voting as voting
+
+    solves = []
+    real = voting.milp
+
+    def counted(*args, **kwargs):
+        solves.append(int(np.sum(kwargs["integrality"])))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(voting, "milp", counted)
+    take = synthesize(load_layout("glove13"), 300, seed=3).take
+    exact = label_take(take, load_layout("han19"))
+    assert any(solves)  # the wrong layout's clashes: integer programmes
+    solves.clear()
+    quick = label_take(take, load_layout("han19"), LabelSettings(exact_pairs=0))
+    assert solves and not any(solves)  # clashes, each settled by its relaxation
+    per = quick.per_sample()
+    for label in range(len(quick.names)):  # still exclusive: a label once per frame
+        assert ((per == label).sum(axis=1) <= 1).all()
+    assert exact.per_sample().shape == per.shape
+    solves.clear()
+    exact.confidence[:] = 0.5  # doubtful, as if labeled with another layout: glove13 and han19 are tried
+    assert layout_doubt(take, load_layout("tips5"), exact).better == "glove13"
+    assert solves and not any(solves)  # han19's clashes among glove13's markers
+
+
 def test_a_low_confidence_alone_raises_no_layout_doubt():
     """Short right takes can score low (8 of han2018's 316 raw takes: 20-49 %): no other layout
     does clearly better there, so nothing is said."""

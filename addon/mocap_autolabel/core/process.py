@@ -146,8 +146,10 @@ def choose_layout(take: Take, requested: str | None) -> str:
 FEWER_POINTS = 1.5
 
 
-#: The settings another layout is tried with (:func:`layout_doubt`).
-NO_OCCLUSION_PRIOR = LabelSettings(occlusion_prior=(0.0, 0.0))
+#: The settings another layout is tried with (:func:`layout_doubt`): a quick reading, whose vote settles
+#: its clashes by the rounded relaxation (on another layout's markers the integer programme of a clash can
+#: take minutes, within its work bound).
+QUICK_READING = LabelSettings(occlusion_prior=(0.0, 0.0), exact_pairs=0)
 
 
 def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: float = 0.95,
@@ -175,7 +177,7 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
                 # Without the occlusion prior: on another layout's markers a heavily occluded take's
                 # label bonus makes nearly every label worth a segment, and the vote's programme
                 # grows by an order of magnitude; which layout fits is asked of the evidence alone.
-                other = label_take(excerpt, load_layout(name), NO_OCCLUSION_PRIOR, cache=cache)
+                other = label_take(excerpt, load_layout(name), QUICK_READING, cache=cache)
             except MocapInputError:  # e.g. no samples in the excerpt
                 continue
             shares[name] = other.summary(confident)["confident_share"]

@@ -54,6 +54,9 @@ class LabelSettings:
         window: label a longer take in overlapping windows of this many frames; None: whole.
         stride: score every ``stride``-th frame of a trajectory (``vote``); None: every 1/30 s
             for labelers that allow it, every frame otherwise.
+        exact_pairs: the vote's clashes of more candidate (segment, label) pairs than this are
+            settled by its integer programme's rounded linear relaxation (``vote``): a quick
+            reading of a take, as the layout check's; None: always by the integer programme.
     """
 
     method: str = "set"
@@ -79,6 +82,7 @@ class LabelSettings:
     props: bool = True
     window: int | None = WINDOW_FRAMES
     stride: int | None = None
+    exact_pairs: int | None = None
 
     def __post_init__(self) -> None:
         # Sequences are stored as tuples so that settings compare (and hash) by value.

@@ -113,6 +113,8 @@ class Vote(TemporalMode):
               ) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
         s = run.settings
         fitted = run.info
+        if s.exact_pairs is not None:
+            exact_pairs = min(s.exact_pairs, exact_pairs if exact_pairs is not None else s.exact_pairs)
         return vote(scored, run.segments, run.locked_at, s.vote_score, s.power_p, s.power_q, s.split_swaps,
                     null_prior=null_prior(fitted), crossings=run.crossings,
                     switch_cost=tuple(fitted["switch_cost"]), exact_pairs=exact_pairs)
