@@ -357,6 +357,21 @@ def test_a_quick_reading_settles_clashes_by_the_relaxation_and_the_layout_check_
     assert solves and not any(solves)  # han19's clashes among glove13's markers
 
 
+def test_a_sparse_layouts_own_take_is_not_called_a_dense_layouts_of_as_many_markers():
+    """A studio's 13-marker set (tips10_hand3) labels its own take with set_any, whose raw confidences seldom
+    reach 0.95; glove13's calibrated ones claimed the take ("is this a glove13 take?"). Only layouts of more
+    markers are tried against an uncalibrated labeling, so a han19 or glove13 take labeled with a sparse
+    layout of fewer markers is still named."""
+    take = synthesize(load_layout("tips10_hand3"), 400, seed=11).take
+    own = label_take(take, load_layout("tips10_hand3"))
+    assert own.info["confidence"].startswith("raw") and own.summary()["confident_share"] < DOUBTFUL_SHARE
+    assert layout_doubt(take, load_layout("tips10_hand3"), own) is None
+    glove = synthesize(load_layout("glove13"), 600, seed=3).take
+    wrong = label_take(glove, load_layout("tips5"))
+    doubt = layout_doubt(glove, load_layout("tips5"), wrong)
+    assert doubt is not None and doubt.better == "glove13"
+
+
 def test_a_low_confidence_alone_raises_no_layout_doubt():
     """Short right takes can score low (8 of han2018's 316 raw takes: 20-49 %): no other layout
     does clearly better there, so nothing is said."""

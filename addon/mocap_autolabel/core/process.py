@@ -158,8 +158,12 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
 
     Nothing is tried while at least :data:`DOUBTFUL_SHARE` of the labeled samples are confident.
     Below it, every built-in layout with a shipped ``set`` model labels the take's first
-    :data:`CHECK_FRAMES` frames; one whose confident share is at least :data:`DOUBTFUL_SHARE` and
-    :data:`CLEARLY_BETTER` above ``layout``'s (on the same frames) is named.
+    :data:`CHECK_FRAMES` frames (:data:`QUICK_READING`); one whose confident share is at least
+    :data:`DOUBTFUL_SHARE` and :data:`CLEARLY_BETTER` above ``layout``'s (on the same frames) is named.
+    Where ``labeling``'s confidences are not calibrated (a layout with no model of its own, labeled by
+    ``set_any``, whose raw confidences seldom reach ``confident``), only layouts of more markers are
+    tried: a dedicated model's calibrated confidences claimed sparse takes of 13 markers that were none
+    of its layout's (glove13 on han2018 takes of tips and proximal phalanges and a hand cluster).
     """
     share = labeling.summary(confident)["confident_share"]
     if share >= DOUBTFUL_SHARE:
@@ -170,9 +174,10 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
     # A layout with far more markers than the take shows points is not the take's (and labeling
     # with it sets the vote a large, slow problem): a sparse set's take is not tried as han19.
     most = FEWER_POINTS * float(np.median(excerpt.valid.sum(axis=1))) + 2
+    fewest = 0 if labeling.info.get("confidence") == "calibrated" else len(layout) + 1
     for name in builtin_layouts():
         if (name != layout.name and os.path.isfile(shipped_model("set", name))
-                and len(load_layout(name)) <= most):
+                and fewest <= len(load_layout(name)) <= most):
             try:
                 # Without the occlusion prior: on another layout's markers a heavily occluded take's
                 # label bonus makes nearly every label worth a segment, and the vote's programme
