@@ -26,7 +26,7 @@ from .labeling import Labeling, labeled_take, layout_markers
 from .layout import DEFAULT_LAYOUT, Layout, builtin_layouts, layout_for_names, load_layout
 from .pipeline import label_take
 from .settings import Corrections, LabelSettings
-from .stages.decide import TEMPORAL_MODES
+from .stages.decide import CALIBRATED, TEMPORAL_MODES
 from .stages.refine import CLEARLY_BETTER, DOUBTFUL_SHARE
 from .stages.run import Progress, no_progress
 from .take import Take, read_take
@@ -174,7 +174,7 @@ def layout_doubt(take: Take, layout: Layout, labeling: Labeling, confident: floa
     # A layout with far more markers than the take shows points is not the take's (and labeling
     # with it sets the vote a large, slow problem): a sparse set's take is not tried as han19.
     most = FEWER_POINTS * float(np.median(excerpt.valid.sum(axis=1))) + 2
-    fewest = 0 if labeling.info.get("confidence") == "calibrated" else len(layout) + 1
+    fewest = 0 if labeling.info.get("confidence") == CALIBRATED else len(layout) + 1
     for name in builtin_layouts():
         if (name != layout.name and os.path.isfile(shipped_model("set", name))
                 and fewest <= len(load_layout(name)) <= most):

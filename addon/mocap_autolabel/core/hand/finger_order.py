@@ -121,6 +121,12 @@ def _well_seen(observed: np.ndarray, frames: int) -> np.ndarray:
     return best[np.linspace(0, len(best) - 1, min(frames, len(best))).astype(int)]
 
 
+def _per_solved_frame(lost: np.ndarray | None, observed: np.ndarray, frames: int) -> np.ndarray | None:
+    """The labeler's loss per order (:func:`labeler_loss`) per frame :func:`order_residuals` solves the
+    template on (``frames`` of ``observed``), as :func:`_chosen` weighs it; None stays None."""
+    return None if lost is None else lost / len(_well_seen(observed, frames))
+
+
 def order_residuals(observed: np.ndarray, layout: Layout, groups: list[list[int]], side: str,
                     frames: int = FRAMES) -> np.ndarray | None:
     """float ``(len(candidate_orders()),)``: the median marker residual (metres) of the ``side``
@@ -201,8 +207,7 @@ def checked_order(observed: np.ndarray, layout: Layout, groups: list[list[int]],
     median = order_residuals(observed, layout, groups, side)
     if median is None:
         return identity, {}
-    per_frame = None if lost is None else lost / len(_well_seen(observed, FRAMES))
-    return _decided(median, side, lost=per_frame)
+    return _decided(median, side, lost=_per_solved_frame(lost, observed, FRAMES))
 
 
 def checked_sides(observed: list[np.ndarray], layout: Layout, groups: list[list[int]],
@@ -243,7 +248,7 @@ def checked_spans(observed: np.ndarray, layout: Layout, groups: list[list[int]],
         median = order_residuals(part, layout, groups, side, frames=SPAN_SAMPLE)
         if median is None:
             continue
-        lost = None if lost_in is None else lost_in(start, stop) / len(_well_seen(part, SPAN_SAMPLE))
+        lost = _per_solved_frame(None if lost_in is None else lost_in(start, stop), part, SPAN_SAMPLE)
         if _chosen(median, margin, lost):
             out.append((start, stop, *_decided(median, side, margin, lost)))
     return out

@@ -113,8 +113,8 @@ class Vote(TemporalMode):
               ) -> tuple[Segments, np.ndarray, np.ndarray, dict]:
         s = run.settings
         fitted = run.info
-        if s.exact_pairs is not None:
-            exact_pairs = min(s.exact_pairs, exact_pairs if exact_pairs is not None else s.exact_pairs)
+        if s.exact_pairs is not None and (exact_pairs is None or s.exact_pairs < exact_pairs):
+            exact_pairs = s.exact_pairs
         return vote(scored, run.segments, run.locked_at, s.vote_score, s.power_p, s.power_q, s.split_swaps,
                     null_prior=null_prior(fitted), crossings=run.crossings,
                     switch_cost=tuple(fitted["switch_cost"]), exact_pairs=exact_pairs)
@@ -232,6 +232,10 @@ def null_prior(info: dict) -> tuple[float, float]:
     return per_tracklet, per_sample - slope * max(0.0, info["break_rate"] - knee)
 
 
+#: ``info["confidence"]`` of a labeling whose confidences went through a shipped calibration.
+CALIBRATED = "calibrated"
+
+
 def calibrate_confidence(run: LabelRun, labeling: Labeling, samples: Samples) -> Labeling:
     """Each segment's evidence and its confidence: the mean probability, mapped through the shipped
     calibration for this method, mode and layout where one exists (locked segments are certain)."""
@@ -243,7 +247,7 @@ def calibrate_confidence(run: LabelRun, labeling: Labeling, samples: Samples) ->
     run.info["confidence"] = "raw (no calibration for this method)"
     if calibration is not None:
         labeling.confidence = calibration(labeling.evidence, labeled=labeling.label >= 0)
-        run.info["confidence"] = "calibrated"
+        run.info["confidence"] = CALIBRATED
     elif s.calibrate_confidence and not run.method.sure_of_itself:
         # gmm or nearest on a layout nobody calibrated them for: their probabilities were never
         # measured against the truth there, and a high one is no promise, so none is sure.
