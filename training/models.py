@@ -8,6 +8,7 @@ import torch
 from torch import nn
 
 from .sinkhorn import NEG, log_sinkhorn_dustbin, scaling_sinkhorn_dustbin
+from .subnormals import RBF_EXPONENT_FLOOR
 
 
 class PairBiasAttention(nn.Module):
@@ -139,7 +140,9 @@ class SetLabeler(nn.Module):
         # Radial basis of every pair distance, laid out (B, R, K*K) so that the per-head biases are
         # one matrix product with no transposes (the pair tensors dominate the run time).
         scaled = dist.reshape(b, 1, k * k) * (1.0 / self.width) - (self.centres / self.width)[None, :, None]
-        rbf = torch.exp(-scaled * scaled)  # (B, R, K*K)
+        # Floored: far from a centre the basis underflows into subnormal floats, many times slower to
+        # compute with on CPUs and no signal (training/subnormals.py).
+        rbf = torch.exp(torch.clamp(-scaled * scaled, min=RBF_EXPONENT_FLOOR))  # (B, R, K*K)
         bias = (pair.weight @ rbf + pair.bias[None, :, None]).reshape(b, -1, k, k)
         rbf = rbf.transpose(1, 2).reshape(b, k, k, -1)
         if mask is not None:

@@ -219,3 +219,55 @@ def test_training_batches_group_frames_of_similar_size_and_use_each_frame_once()
     assert max(spread) < int(pool.mask.sum(axis=1).max() - pool.mask.sum(axis=1).min())
     means = [float(c.mean()) for c in counts]
     assert means != sorted(means)  # batch order is shuffled, not small to large
+
+
+def _unfloored(model):
+    """``model`` with :func:`training.subnormals.floor_radial_exponents`' edit taken out again."""
+    floors = {n.output[0]: n.input[0] for n in model.graph.node if n.op_type == "Max" and n.name.endswith("_floor")}
+    kept = [n for n in model.graph.node if n.output[0] not in floors]
+    for n in kept:
+        n.input[:] = [floors.get(i, i) for i in n.input]
+    del model.graph.node[:]
+    model.graph.node.extend(kept)
+    return model
+
+
+@pytest.mark.parametrize(("layout_name", "model_layout"), [("han19", "han19"), ("glove13", "glove13"),
+                                                           ("tips5_hand3", "any")])
+def test_the_set_models_radial_bases_are_floored_and_score_as_without_the_floor(layout_name, model_layout, tmp_path):
+    """Subnormal floats are many times slower to compute with; the floor must not change a score."""
+    onnx = pytest.importorskip("onnx", reason="onnx is not installed")
+    from training.subnormals import floor_radial_exponents, radial_exps
+
+    path = shipped_model("set", model_layout)
+    shipped = onnx.load(path)
+    assert not radial_exps(shipped.graph)  # every radial basis of the shipped graph is floored
+    assert floor_radial_exponents(shipped) == 0
+    plain = _unfloored(onnx.load(path))
+    assert radial_exps(plain.graph)  # the test takes the edit out: it sees the floors it must see
+    card = json.load(open(card_path(path)))
+    unfloored = tmp_path / "unfloored.onnx"
+    onnx.save(plain, unfloored)
+    card["sha256"] = hashlib.sha256(open(unfloored, "rb").read()).hexdigest()
+    json.dump(card, open(card_path(unfloored), "w"))
+    layout = load_layout(layout_name)
+    # Hands far apart and ghosts far off: pair distances far beyond the bases' centres.
+    fr = sample_frames(layout, 64, np.random.default_rng(5), FrameConfig(ghosts=(2, 4), distractor_share=1.0,
+                                                                       distractors=(4, 8)))
+    got = OnnxLabeler(path, layout).scores(fr.points, fr.mask)[fr.mask]
+    expected = OnnxLabeler(unfloored, layout).scores(fr.points, fr.mask)[fr.mask]
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-4)
+    assert (got.argmax(axis=-1) == expected.argmax(axis=-1)).all()
+
+
+def test_the_networks_radial_bases_never_underflow_into_subnormal_floats():
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch==2.13.0)")
+    from training.models import SetLabeler
+    from training.subnormals import RBF_EXPONENT_FLOOR
+
+    net = SetLabeler(5)
+    dist = torch.tensor([[[0.0, 0.02, 1.5], [0.02, 0.0, 3.0], [1.5, 3.0, 0.0]]])  # metres: near and far pairs
+    _, rbf = net.pair_terms(dist, net.pair, None)
+    rbf = rbf.numpy()
+    assert rbf.min() >= np.float32(np.exp(RBF_EXPONENT_FLOOR)) > np.finfo(np.float32).tiny
+    assert rbf.max() > 0.5  # near pairs still read as near
