@@ -161,13 +161,71 @@ def test_exclusive_assignment_at_the_smallest_work_bound_still_labels():
     labeling = label_take(synthesize(load_layout("glove13"), 240, seed=4).take, load_layout("glove13"))
     assert labeling.info["work_limited"] == 0 and work_limit_warning(labeling) is None
     labeling.info["work_limited"] = 2
-    assert "reached its bound of 1000 search nodes 2 time(s)" in work_limit_warning(labeling)
+    assert "reached its work bound 2 time(s) (1000 search nodes" in work_limit_warning(labeling)
     for labels in (hurried, solved):
         assert labels[0] == 1 and labels[5] == NULL
         for a in range(n):
             for b in range(a + 1, n):
                 if segs.start[a] < segs.stop[b] and segs.start[b] < segs.stop[a] and labels[a] >= 0:
                     assert labels[a] != labels[b]
+
+
+def test_a_programme_whose_relaxation_leaves_too_many_pairs_undecided_is_rounded_and_counted(monkeypatch):
+    """The node bound does not bound HiGHS's root; a relaxation with more than FRACTIONAL_PAIRS
+    fractional pairs is rounded instead of solved, and counted as work-limited."""
+    import mocap_autolabel.core.temporal.voting as voting
+
+    rng = np.random.default_rng(7)
+    n, m = 80, 4
+    locked = {1: 2, 7: NULL}
+    for _ in range(6):  # the first of these dense problems whose relaxation leaves pairs fractional
+        start = rng.integers(0, 60, n)
+        segs = _segments(start, start + rng.integers(1, 20, n))
+        weights = rng.normal(size=(n, m + 1)) * 5
+        weights[:, :m] += 4.0
+        switch = np.where(rng.random(n) < 0.3, 3.0, 0.0)
+        exact_facts, rounded_facts = {}, {}
+        exact = exclusive_assignment(weights, segs, locked, candidates=m, switch=switch, facts=exact_facts)
+        relaxed = exclusive_assignment(weights, segs, locked, candidates=m, switch=switch, exact_pairs=0)
+        if not np.array_equal(exact, relaxed):
+            break
+    assert not np.array_equal(exact, relaxed)
+    integer_solves = []
+    solve = voting.milp
+
+    def spy(cost, **kw):
+        integer_solves.append(bool(kw["integrality"].any()))
+        return solve(cost, **kw)
+
+    monkeypatch.setattr(voting, "milp", spy)
+    monkeypatch.setattr(voting, "FRACTIONAL_PAIRS", 0)
+    rounded = exclusive_assignment(weights, segs, locked, candidates=m, switch=switch, facts=rounded_facts)
+    assert np.array_equal(rounded, relaxed) and integer_solves == [False]
+    assert exact_facts == {"work_limited": 0} and rounded_facts == {"work_limited": 1}
+
+
+def test_a_sparse_take_read_with_the_dense_layout_is_labeled_without_an_unbounded_solve(monkeypatch):
+    """The helper's report: a fingertip take labeled with the default han19 ran in HiGHS's root for
+    over ten minutes. Every integer programme solved exactly must have a relaxation within the
+    bound (the spy fails at once otherwise, rather than hang)."""
+    import mocap_autolabel.core.temporal.voting as voting
+
+    solve = voting.milp
+    widest = []
+
+    def spy(cost, **kw):
+        if kw["integrality"].any():
+            lp = solve(cost, **{**kw, "integrality": np.zeros_like(kw["integrality"])})
+            values = np.round(lp.x[:int(kw["integrality"].sum())], 6)
+            widest.append(int(((values > 0) & (values < 1)).sum()))
+            assert widest[-1] <= voting.FRACTIONAL_PAIRS, f"an exact solve of {widest[-1]} fractional pairs"
+        return solve(cost, **kw)
+
+    monkeypatch.setattr(voting, "milp", spy)
+    take = synthesize(load_layout("tips5_hand3"), 1500, seed=3).take
+    labeling = label_take(take, load_layout("han19"))
+    assert labeling.info["work_limited"] >= 1  # the bound acted: this take does pose such a programme
+    assert "reached its work bound" in work_limit_warning(labeling)
 
 
 @pytest.mark.parametrize("seed", range(12))

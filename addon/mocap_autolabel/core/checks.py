@@ -12,7 +12,7 @@ from .labelers import labeler_method
 from .labeling import Labeling, labeled_take
 from .layout import Layout
 from .take import Take
-from .temporal.voting import MILP_NODES
+from .temporal.voting import FRACTIONAL_PAIRS, MILP_NODES
 
 
 @dataclass(frozen=True)
@@ -185,9 +185,10 @@ def work_limit_warning(labeling: Labeling) -> str | None:
     stopped = labeling.info.get("work_limited", 0)
     if not stopped:
         return None
-    return (f"the vote's exclusive assignment reached its bound of {MILP_NODES} search nodes {stopped} time(s): "
-            f"the labels are the best found within it, never worse than a greedy labeling (takes of hands need "
-            f"one node; is this a hand?)")
+    return (f"the vote's exclusive assignment reached its work bound {stopped} time(s) ({MILP_NODES} search nodes, "
+            f"or more than {FRACTIONAL_PAIRS} undecided pairs in its relaxation): the labels are the best found "
+            f"within it, never worse than a greedy labeling (takes of hands stay far inside it; is this a hand, "
+            f"and of this layout?)")
 
 
 def occlusion_note(labeling: Labeling) -> str | None:

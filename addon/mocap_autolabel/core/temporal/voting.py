@@ -220,6 +220,13 @@ MILP_NODES = 1000
 #: relaxation. Where two hands are mixed up, the exact programme's root alone can take minutes on a
 #: few thousand frames; hands apart stay well under this.
 FIRST_LOOK_PAIRS = 4000
+#: The node bound does not bound the root: HiGHS's cutting planes and heuristics there are
+#: unbounded, and a programme whose linear relaxation leaves many pairs undecided can spend many minutes
+#: in them (a sparse take read with the dense han19 layout). Where the relaxation leaves more
+#: candidate pairs fractional than this, it is rounded (as a first look's) and the solve counts as
+#: work-limited. Hand takes leave none or a few hundred at most (two hands interlaced); a body take
+#: read as a hand, up to about 300.
+FRACTIONAL_PAIRS = 400
 
 
 def exclusive_assignment(weights: np.ndarray, segments: Segments, locked: dict[int, int] | None = None,
@@ -325,8 +332,9 @@ def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarra
     """The exclusive assignment as an integer programme over the candidate (segment, label) pairs
     (and one switch variable per paid link between pieces of a trajectory); returns labels with
     null as ``M``, and whether the work bound stopped the solver (then the better of its labeling
-    and :func:`_greedy_assignment`'s). ``relaxed``: the linear relaxation instead, its pairs taken
-    greedily in the order of their values."""
+    and :func:`_greedy_assignment`'s; or its rounded relaxation, where that leaves more than
+    :data:`FRACTIONAL_PAIRS` pairs fractional). ``relaxed``: the linear relaxation instead, its pairs
+    taken greedily in the order of their values."""
     n, m1 = weights.shape
     m = m1 - 1
     n_pairs = len(var_seg)
@@ -383,14 +391,16 @@ def _milp_assignment(weights: np.ndarray, segments: Segments, var_seg: np.ndarra
         col = m if label == NULL else label
         lower[np.flatnonzero((var_seg == s) & (var_lab == col))] = 1.0
     cost = np.concatenate([-weights[var_seg, var_lab], switch[links]])
-    # Switches follow the labels; relaxed, nothing is integral.
-    integrality = np.zeros(n_vars) if relaxed else np.concatenate([np.ones(n_pairs), np.zeros(len(links))])
-    res = milp(cost, constraints=LinearConstraint(a, lb_rows, ub_rows), integrality=integrality,
-               bounds=Bounds(lower, np.ones(n_vars)), options={"node_limit": int(node_limit)})
-    if relaxed:
+    problem = {"constraints": LinearConstraint(a, lb_rows, ub_rows), "bounds": Bounds(lower, np.ones(n_vars)),
+               "options": {"node_limit": int(node_limit)}}
+    if relaxed or n_pairs > FRACTIONAL_PAIRS:
+        lp = milp(cost, integrality=np.zeros(n_vars), **problem)
         # Rounded to ignore the last digits' noise: ties then go by gain, segment and label.
-        priority = None if res.x is None else np.round(res.x[:n_pairs], 6)
-        return _greedy_assignment(weights, segments, var_seg, var_lab, locked, switch, priority), False
+        values = None if lp.x is None else np.round(lp.x[:n_pairs], 6)
+        too_hard = values is not None and int(((values > 0) & (values < 1)).sum()) > FRACTIONAL_PAIRS
+        if relaxed or too_hard:
+            return _greedy_assignment(weights, segments, var_seg, var_lab, locked, switch, values), not relaxed
+    res = milp(cost, integrality=np.concatenate([np.ones(n_pairs), np.zeros(len(links))]), **problem)
     if res.status in (2, 3):  # all null but the locks is always a labeling: never here
         raise ValueError(f"no exclusive labeling exists: {res.message}")
     stopped = res.status != 0  # the work bound (HiGHS's node or solution limit) stopped the search
