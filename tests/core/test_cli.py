@@ -220,7 +220,7 @@ def test_label_and_solve_progress_bar_on_stderr_only_when_shown(capsys, monkeypa
 def test_foreseeable_failures_say_what_is_wrong_in_one_line(capsys, tmp_path):
     demo = str(ROOT / "samples" / "demo_take.c3d")
     assert main(["label", demo, "--report", str(tmp_path)]) == 1
-    assert capsys.readouterr().err.strip() == f"error: {tmp_path}: is a folder; give a file name for the report"
+    assert capsys.readouterr().err.strip() == f"error: {tmp_path}: is a folder; give a file name"
     vicon = str(data_path("c3d", "ezc3d-testFiles", "Vicon.c3d"))
     assert main(["label", vicon, "--validate"]) == 1
     err = capsys.readouterr().err.strip()

@@ -114,6 +114,38 @@ def test_an_output_in_a_folder_that_cannot_be_written_names_the_output_and_the_c
     assert not out.exists() and not _partials(unwritable)
 
 
+def test_every_output_is_checked_before_the_work_so_a_bad_one_leaves_no_other_written(raw, unwritable, tmp_path,
+                                                                                      capsys):
+    """``label -o x.c3d --report dir.json`` (a folder) wrote x.c3d, then failed on the report."""
+    labeled, folder = tmp_path / "x.c3d", tmp_path / "dir.json"
+    folder.mkdir()
+    assert main(["label", str(raw), "-o", str(labeled), "--report", str(folder)]) == 1
+    assert _error_line(capsys) == f"error: {folder}: is a folder; give a file name"
+    assert main(["label", str(raw), "-o", str(labeled), "--report", str(unwritable / "r.json")]) == 1
+    assert _error_line(capsys).startswith(f"error: {unwritable / 'r.json'}: cannot write in {unwritable} (")
+    assert main(["label", str(raw), "--report", str(tmp_path / "r.json"), "-o", str(unwritable / "x.c3d")]) == 1
+    _error_line(capsys)
+    assert main(["label", str(raw), "-o", str(labeled)]) == 0
+    capsys.readouterr()
+    filled = tmp_path / "filled.c3d"
+    assert main(["fill", str(labeled), "-o", str(filled), "--method", "spline", "--report", str(folder)]) == 1
+    assert _error_line(capsys) == f"error: {folder}: is a folder; give a file name"
+    assert sorted(os.listdir(tmp_path)) == ["dir.json", "read-only", "x.c3d"] and not os.listdir(folder)
+
+
+def test_an_output_is_never_an_input_nor_two_outputs_one_file(raw, tmp_path, capsys):
+    """``label take.c3d -o take.c3d`` replaced the raw capture with the labeled one."""
+    take = tmp_path / "take.c3d"
+    take.write_bytes(raw.read_bytes())
+    assert main(["label", str(take), "-o", str(take)]) == 1
+    assert _error_line(capsys) == f"error: {take}: is an input of this command; give another file name for the output"
+    assert take.read_bytes() == raw.read_bytes()
+    both = tmp_path / "both.c3d"
+    assert main(["label", str(take), "-o", str(both), "--report", str(both)]) == 1
+    assert _error_line(capsys) == f"error: {both}: is given for two outputs; give each its own file name"
+    assert sorted(os.listdir(tmp_path)) == ["take.c3d"]
+
+
 def test_a_report_on_a_full_device_names_the_report(raw, tmp_path, capsys):
     """/dev/full: every write fails with ENOSPC, as on a full disk. A device is written in place (renaming a
     file onto it would replace the device itself)."""

@@ -31,6 +31,19 @@ def _fail(path: str, exc: BaseException) -> int:
     return EXIT_FAILED
 
 
+def _outputs_refused(file: str, outputs: list[str | None], inputs: list[str | None]) -> int | None:
+    """:func:`..core.atomic.check_outputs` before a command's work (``inputs``: its files read, those
+    that exist): the exit code after one line naming the output refused, or None where all can be
+    written. A bad output found only at the end would leave the others written."""
+    from ..core.atomic import check_outputs
+
+    try:
+        check_outputs(outputs, [p for p in inputs if p and os.path.isfile(p)])
+    except OSError as exc:
+        return _fail(file, exc)
+    return None
+
+
 def _bpy_or_none(what: str):
     """The bpy module, or None after telling the user how to get it."""
     try:

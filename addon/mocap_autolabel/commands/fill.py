@@ -3,7 +3,7 @@ that ``label --fill`` prints too."""
 
 from __future__ import annotations
 
-from .common import EXIT_OK, _fail, _write_report
+from .common import EXIT_OK, _fail, _outputs_refused, _write_report
 from .progress import _ProgressBar
 
 
@@ -17,6 +17,10 @@ def _fill(args) -> int:
     from ..core.settings import LabelSettings
     from ..core.take import read_take
 
+    refused = _outputs_refused(args.file, [args.output, args.report],
+                               [args.file, args.layout, *(args.calibration or "").split(",")])
+    if refused is not None:
+        return refused
     bar = _ProgressBar.for_args(args)
     try:
         layout = load_layout(args.layout) if args.layout else None

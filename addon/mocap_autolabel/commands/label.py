@@ -16,6 +16,7 @@ from .common import (
     _allows_validation,
     _bpy_or_none,
     _fail,
+    _outputs_refused,
     _write_report,
 )
 from .fill import _fill_line, _print_open_gaps
@@ -65,6 +66,10 @@ def _label(args) -> int:
             return EXIT_FAILED
     if args.blend and _bpy_or_none("label --blend") is None:
         return EXIT_USAGE
+    refused = _outputs_refused(args.file, [args.output, args.report, args.html, args.labels, args.blend],
+                               [args.file, args.fit, args.calibration, args.layout])
+    if refused is not None:
+        return refused
     bar = _ProgressBar.for_args(args)
     try:
         layout = load_layout(args.layout)

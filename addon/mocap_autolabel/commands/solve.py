@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, _bpy_or_none, _fail, _write_report
+from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, _bpy_or_none, _fail, _outputs_refused, _write_report
 from .progress import _ProgressBar
 
 #: ``--bone-names``: the presets of ``blender.export.BONE_NAME_PRESETS`` (spelled out: ``--help`` loads no bpy;
@@ -100,6 +100,11 @@ def _solve(args) -> int:
                   f"or little), got {item!r}", file=sys.stderr)
             return EXIT_USAGE
         contacts.append((int(frame), finger.strip()))
+    # --save-calibration may rewrite the --calibration it read (the same performer's file, kept up to date).
+    refused = _outputs_refused(args.file, [args.blend, args.fbx, args.bvh, args.report, args.save_calibration],
+                               [args.file, args.layout])
+    if refused is not None:
+        return refused
     bpy = None
     if args.blend or args.fbx or args.bvh:
         bpy = _bpy_or_none("solve --blend/--fbx/--bvh")

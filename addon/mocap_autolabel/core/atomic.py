@@ -8,7 +8,7 @@ import errno
 import json
 import os
 import secrets
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 
 #: Characters of the target's name kept in the temporary name: with the token, ".partial" and the
 #: extension it stays under the 255 bytes a file name may hold (4 bytes a character at most in UTF-8).
@@ -49,19 +49,7 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterato
             _name(exc, path, path)
             raise
         return
-    folder = os.path.dirname(os.path.abspath(path))
-    stem, ext = os.path.splitext(os.path.basename(path))
-    ending = ext if suffix is None else suffix
-    tmp = os.path.join(folder, f".{stem[:STEM_CHARS]}.{secrets.token_hex(4)}.partial{ending}")
-    try:
-        os.makedirs(folder, exist_ok=True)
-        # Created and removed at once, so that a folder that cannot be written fails here with its real
-        # cause (a writer may say something confusing, and ezc3d says nothing at all). Not left in place:
-        # writers such as Blender back up an existing target as ``.blend1``.
-        os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
-        os.remove(tmp)
-    except OSError as exc:
-        raise type(exc)(exc.errno, f"cannot write in {folder} ({exc.strerror})", path) from None
+    tmp = _probed(path, suffix)
     try:
         yield tmp
         os.replace(tmp, path)
@@ -71,6 +59,62 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterato
         if isinstance(exc, OSError):
             _name(exc, path, tmp)
         raise
+
+
+def _probed(path: str, suffix: str | None = None) -> str:
+    """A free temporary name beside ``path`` (ending as ``path`` or in ``suffix``), its folder made
+    and proven writable: the name is created and removed at once, so that a folder that cannot be
+    written fails here with its real cause (a writer may say something confusing, and ezc3d says
+    nothing at all). Not left in place: writers such as Blender back up an existing target as
+    ``.blend1``."""
+    folder = os.path.dirname(os.path.abspath(path))
+    stem, ext = os.path.splitext(os.path.basename(path))
+    ending = ext if suffix is None else suffix
+    tmp = os.path.join(folder, f".{stem[:STEM_CHARS]}.{secrets.token_hex(4)}.partial{ending}")
+    try:
+        os.makedirs(folder, exist_ok=True)
+        os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        os.remove(tmp)
+    except OSError as exc:
+        raise type(exc)(exc.errno, f"cannot write in {folder} ({exc.strerror})", path) from None
+    return tmp
+
+
+def check_outputs(outputs: Sequence[str | os.PathLike | None], inputs: Sequence[str | os.PathLike] = ()) -> None:
+    """Refuse, before any work, every output a command would fail to write at its end: a folder, a
+    folder that cannot be written, one of the ``inputs`` (the raw take would be overwritten), or
+    the same file named for two outputs. Then a failed output never leaves the others written.
+
+    Raises:
+        OSError: naming the first output refused.
+    """
+    seen: set[str] = set()
+    read = {os.path.realpath(os.fspath(p)) for p in inputs}
+    for given in outputs:
+        if given is None:
+            continue
+        path = os.fspath(given)
+        real = os.path.realpath(path)
+        if os.path.isdir(path):
+            raise IsADirectoryError(errno.EISDIR, "is a folder; give a file name", path)
+        if real in read:
+            raise OSError(errno.EEXIST, "is an input of this command; give another file name for the output", path)
+        if real in seen:
+            raise OSError(errno.EEXIST, "is given for two outputs; give each its own file name", path)
+        seen.add(real)
+        if os.path.exists(path) and not os.path.isfile(path):  # a device or pipe is written in place
+            continue
+        folder = os.path.dirname(os.path.abspath(path))
+        if os.path.isdir(folder):
+            _probed(path)
+            continue
+        above = folder  # made by the writer at the end: nothing is made before the work succeeds
+        while not os.path.exists(above):
+            above = os.path.dirname(above)
+        if not os.path.isdir(above):
+            raise NotADirectoryError(errno.ENOTDIR, f"cannot write in {folder} ({above} is a file)", path)
+        if not os.access(above, os.W_OK | os.X_OK):
+            raise PermissionError(errno.EACCES, f"cannot write in {folder} ({above} cannot be written)", path)
 
 
 def _name(exc: OSError, path: str, tmp: str) -> None:
