@@ -67,11 +67,12 @@ def test_the_layout_is_picked_from_the_files_point_names(empty_scene, bpy_module
     assert "Layout set to glove13: the file names every glove13 marker" in out
     assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}  # labels with the picked layout
     assert _state(glove).layout == "glove13"
-    # Back and forth with the Take field: the Layout shows each take's own.
+    # Back and forth with the Take field: the Layout shows each take's own (the demo's, the file chosen
+    # while it was in the Take field).
     settings.take = demo
-    assert settings.layout == "han19"
+    assert settings.layout_file == str(tmp_path / "my_layout.toml")
     settings.take = glove
-    assert settings.layout == "glove13"
+    assert settings.layout == "glove13" and settings.layout_file == ""
     # The user chooses han19 for the glove take: it stays the glove's choice.
     settings.layout = "han19"
     settings.take = demo
@@ -203,3 +204,34 @@ def test_the_layout_is_picked_from_the_takes_shape_when_nobody_chose_one(empty_s
         assert _state(coll).layout == "glove13"
     else:
         assert result == {"FINISHED"} and _state(coll).layout == "han19"
+
+
+def test_a_takes_layout_file_comes_back_with_the_take(empty_scene, bpy_module, tmp_path):
+    """The Layout File a take was labeled with was cleared when the Take field came back to the take
+    (even set to the same take), and Label then used han19 (a new user's trial)."""
+    bpy = bpy_module
+    settings = empty_scene.mocap_autolabel
+    studio = tmp_path / "studio.toml"
+    studio.write_text((ROOT / "addon" / "mocap_autolabel" / "core" / "layouts" / "han19.toml").read_text()
+                      .replace('name = "han19"', 'name = "studio"'))
+    demo = _import(bpy, DEMO, tmp_path)
+    settings.layout_file = str(studio)
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"} and _state(demo).layout == str(studio)
+    settings.take = demo  # the same take again
+    assert settings.layout_file == str(studio)
+    (tmp_path / "b").mkdir()
+    other = _import(bpy, DEMO, tmp_path / "b")
+    settings.layout_file = ""
+    settings.layout = "glove13"  # the other take's own choice
+    settings.take = demo
+    assert settings.layout_file == str(studio)
+    settings.take = other
+    assert settings.layout_file == "" and settings.layout == "glove13"
+    name = demo.name
+    settings.take = other
+    save_and_reopen(bpy, tmp_path / "scene.blend")
+    settings = bpy.context.scene.mocap_autolabel
+    settings.take = bpy.data.collections[name]
+    assert settings.layout_file == str(studio)
+    assert bpy.ops.mocap_autolabel.label() == {"FINISHED"}
+    assert _state(settings.take).layout == str(studio)

@@ -131,13 +131,20 @@ def set_layout(settings, layout: str) -> None:
 
 
 def _follow_layout(self, coll) -> None:
-    """The Take field changed: the Layout field shows the new take's layout (the one chosen for it, else
-    the one it was labeled with), so that Label does not label it with another take's layout."""
+    """The Take field changed: the Layout field (or the Layout File) shows the new take's layout (the one
+    chosen for it, else the one it was labeled with), so that Label does not label it with another
+    take's layout."""
     if coll is None:
         return
     layout = coll.get(LAYOUT_CHOICE) or (load_state(coll).layout if has_review(coll) else None)
     if layout in builtin_layouts():
         set_layout(self, layout)
+    elif layout and layout != self.layout_file:  # a layout file: the take's own, or the one it was labeled with
+        _automatic.append(layout)
+        try:
+            self.layout_file = layout
+        finally:
+            _automatic.pop()
 
 
 def _layout_changed(self, context):
@@ -147,6 +154,13 @@ def _layout_changed(self, context):
         self.take[LAYOUT_CHOICE] = self.layout
     if not _automatic:
         self[USER_LAYOUT] = self.layout
+
+
+def _layout_file_changed(self, context):
+    """The Layout File changed: the take in the Take field remembers it as its layout (cleared: the
+    Layout field's layout again)."""
+    if is_take(self, self.take):
+        self.take[LAYOUT_CHOICE] = self.layout_file or self.layout
 
 
 def _sure_changed(self, context):
@@ -252,7 +266,7 @@ class MOCAPAL_PG_settings(bpy.types.PropertyGroup):
                           description="The imported take to label and review")
     layout: EnumProperty(name="Layout", items=_layouts, default=LAYOUT_DEFAULT, update=_layout_changed,
                          description="Marker layout to label with")
-    layout_file: StringProperty(name="Layout File", subtype="FILE_PATH",
+    layout_file: StringProperty(name="Layout File", subtype="FILE_PATH", update=_layout_file_changed,
                                 description="A layout .toml instead of a built-in layout")
     method: EnumProperty(name="Method", items=_methods, description="Per-frame labeler (set: ours, the default)")
     temporal: EnumProperty(name="Temporal", default="vote", items=TEMPORAL_ITEMS)
