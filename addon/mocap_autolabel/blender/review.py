@@ -275,7 +275,9 @@ def summary(labeling: Labeling, sure: float, first: int = 0) -> dict:
             "props": _props_line(labeling.info.get("props", [])),
             # perm and cnn: their calibrated confidence never reaches the bar (see the CLI's note);
             # "uncalibrated": gmm or nearest on a layout without a calibration
-            "never_confident": labeling.info.get("never_confident") or False}
+            "never_confident": labeling.info.get("never_confident") or False,
+            # set on a layout never calibrated: raw probabilities, seldom at the bar (see the CLI's note)
+            "raw_confidence": str(labeling.info.get("confidence", "")).startswith("raw")}
 
 
 def _props_line(props: list[dict]) -> str | None:

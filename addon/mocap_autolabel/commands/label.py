@@ -119,6 +119,10 @@ def _label(args) -> int:
     if labeling.info.get("never_confident") == "uncalibrated":
         print(f"  note     {args.method} has no confidence calibration for {layout.name}: its probabilities were never "
               f"measured against the truth there, so no segment is rated confident and every one is left for review")
+    elif str(labeling.info.get("confidence", "")).startswith("raw") and args.method == "set":
+        print(f"  note     set has no confidence calibration for {layout.name} (a layout it was never calibrated on): "
+              f"its confidences are the network's raw probabilities, which seldom reach the bar of confident, so "
+              f"the confident share says little of how many labels are right; review the uncertain segments")
     elif labeling.info.get("never_confident"):
         print(f"  note     {args.method} + {args.temporal} never rates a segment confident on {layout.name}: on "
               f"synthetic validation takes none of its segments were right 99.9 % of the time, so all are left "

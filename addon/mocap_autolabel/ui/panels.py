@@ -152,6 +152,11 @@ class MOCAPAL_PT_review(_Sidebar, bpy.types.Panel):
             col.label(text=f"{state.method} has no confidence calibration for this layout", icon="INFO")
             col.label(text="(its probabilities were never measured against the truth):")
             col.label(text="every segment is left for review")
+        elif s["raw_confidence"] and state.method == "set":  # a layout set was never calibrated on
+            col = layout.box().column(align=True)
+            col.label(text="set has no confidence calibration for this layout:", icon="INFO")
+            col.label(text="its raw probabilities seldom reach Confident at,")
+            col.label(text="so the confident share says little: review the list")
         elif s["never_confident"]:  # calibrated, and honestly never sure: every segment is for review
             col = layout.box().column(align=True)
             col.label(text=f"{state.method} + {state.temporal} never rates a segment confident", icon="INFO")
