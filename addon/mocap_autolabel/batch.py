@@ -185,8 +185,11 @@ def run_cache() -> RunCache:
     return RunCache()
 
 
-def find_takes(inputs: list[str], owners: dict[str, str] | None = None) -> list[tuple[str, str]]:
-    """``(path, output name)`` for every take in files, folders (recursively) and globs, sorted.
+def find_takes(inputs: list[str], owners: dict[str, str] | None = None,
+               out_dir: str | None = None) -> list[tuple[str, str]]:
+    """``(path, output name)`` for every take in files, folders (recursively) and globs, sorted;
+    a folder's or glob's files that are this batch's own outputs (``<name>.labeled.c3d`` in
+    ``out_dir``) are no takes: an output folder inside the inputs is not labeled again on a rerun.
 
     The output name keeps a folder input's sub-folders (``sub/take``), so equal file names in
     different folders do not collide; remaining collisions get ``-2``, ``-3``...
@@ -210,7 +213,11 @@ def find_takes(inputs: list[str], owners: dict[str, str] | None = None) -> list[
         else:
             found.append((item, os.path.splitext(os.path.basename(item))[0]))
     unique: dict[str, tuple[str, str]] = {}
+    own = os.path.realpath(out_dir) if out_dir else None
     for path, name in found:  # a take named twice (folder and glob) is done once
+        if own and path.lower().endswith(".labeled.c3d") and path not in inputs \
+                and os.path.realpath(path).startswith(own + os.sep):
+            continue
         unique.setdefault(os.path.abspath(path), (path, name))
     owners = owners or {}
     owned: dict[str, list[str]] = {}
@@ -875,7 +882,8 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
     os.makedirs(out_dir, exist_ok=True)
     _clean_partials(out_dir)
     records = read_records(out_dir)
-    takes = find_takes(inputs, {name: r["file"] for name, r in records.items() if isinstance(r.get("file"), str)})
+    takes = find_takes(inputs, {name: r["file"] for name, r in records.items() if isinstance(r.get("file"), str)},
+                       out_dir)
     made_with = settings_digest(settings)
     run = secrets.token_hex(8)  # this run's mark in the reports it writes
     sizes = {name: (os.path.getsize(path) if os.path.isfile(path) else 0) for path, name in takes}

@@ -148,6 +148,20 @@ def test_two_jobs_give_the_same_outputs(tmp_path):
         assert a.names == b.names and (a.valid == b.valid).all()
 
 
+def test_an_output_folder_inside_the_inputs_is_not_labeled_again(tmp_path):
+    """``batch in -o in`` run twice labeled its own outputs (``take.labeled.labeled.c3d``) the second time."""
+    takes = tmp_path / "takes"
+    _synthetic(takes, 2)
+    first = run_batch([str(takes)], str(takes), BatchSettings(), progress="none")
+    again = run_batch([str(takes)], str(takes), BatchSettings(), progress="none")
+    assert first["ok"] == 2 and again["ok"] == 2 and again["skipped"] == 2
+    assert not [p.name for p in takes.iterdir() if ".labeled." in p.name and not p.name.endswith("1.labeled.c3d")
+                and p.name != "synth0.labeled.c3d"]
+    # A labeled take named on its own is still a take (the user asked for it).
+    named = run_batch([str(takes / "synth0.labeled.c3d")], str(tmp_path / "out"), BatchSettings(), progress="none")
+    assert named["ok"] == 1
+
+
 def test_batch_runs_as_a_blender_script(tmp_path):
     """The way `blender -b --python-exit-code 1 -P addon/mocap_autolabel/cli.py -- batch ...` runs it."""
     takes = tmp_path / "takes"
