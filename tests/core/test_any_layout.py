@@ -127,6 +127,27 @@ def test_a_layout_is_fitted_from_few_to_many_markers_only():
     assert len(scan_layout()) == 25
 
 
+def test_studio_abbreviations_pin_a_marker_to_its_finger_or_the_hand_and_a_poor_fit_is_doubted():
+    """A trial's studio set named THB, IDX, MID, RNG, PNK, HND1-3: IDX, PNK and HND* said nothing, and
+    the fit put them on other fingers and the hand on the wrong side, silently."""
+    from mocap_autolabel.core.layout_fit import DOUBTFUL_RMS, LayoutFit, name_spots
+
+    scan = scan_layout()
+    bones = np.array([m.bone for m in scan.markers])
+    for name, digit in (("IDX", "index_"), ("PNK", "little_"), ("THB", "thumb_"), ("MID", "middle_"),
+                        ("RNG", "ring_"), ("L_IDX2", "index_")):
+        allowed = name_spots(name, scan)
+        assert allowed is not None and all(b.startswith(digit) for b in bones[allowed]), name
+    for name in ("HND1", "R_HND2"):
+        allowed = name_spots(name, scan)
+        assert allowed is not None and all(b == "palm" or b.endswith("_meta") for b in bones[allowed]), name
+    assert name_spots("M7", scan) is None
+    layout = load_layout("tips5_hand3")
+    assert LayoutFit(layout, DOUBTFUL_RMS, "right", [], ["M7"]).doubt() is None
+    doubt = LayoutFit(layout, 0.0124, "left", [], ["M7"]).doubt()
+    assert "12.4 mm RMS (over 8 mm)" in doubt and "shape alone placed them: M7" in doubt
+
+
 def test_a_random_layout_labels_on_a_small_synthetic_take_with_no_model_of_its_own():
     layout = random_layout(np.random.default_rng(101), "studio")  # 8 markers, 2 on the back of the hand
     synth = synthesize(layout, 600, seed=101)

@@ -19,7 +19,7 @@ import re
 import tomllib
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -62,6 +62,24 @@ class LayoutFit:
     rms: float
     side: str
     spots: list[str]
+    #: The markers whose names say nothing of their place (:func:`name_spots`): placed by shape alone.
+    unnamed: list[str] = field(default_factory=list)
+
+    def doubt(self) -> str | None:
+        """One line where the template hand fits the markers worse than :data:`DOUBTFUL_RMS` (some may
+        sit on the wrong bone or the wrong side), else None."""
+        if self.rms <= DOUBTFUL_RMS:
+            return None
+        named = (f"; these names say nothing of their place, so shape alone placed them: {', '.join(self.unnamed)} "
+                 f"(names such as IndexTip or HandTop pin a marker to its finger)") if self.unnamed else ""
+        return (f"the template hand fits these markers at {1000 * self.rms:.1f} mm RMS (over "
+                f"{1000 * DOUBTFUL_RMS:.0f} mm): some may sit on the wrong bone or side; check the layout before "
+                f"labeling with it{named}")
+
+
+#: Metres: a fit worse than this is doubtful (Han et al. 2018 reject a hand labeling whose IK fit
+#: is worse than 8 mm RMS).
+DOUBTFUL_RMS = 0.008
 
 
 def _scan_frames(observed: np.ndarray, count: int) -> np.ndarray:
@@ -72,13 +90,14 @@ def _scan_frames(observed: np.ndarray, count: int) -> np.ndarray:
 
 
 #: Words of marker names that say which digit a marker is on (studios name their markers so).
-_DIGIT_WORDS = (("thumb", r"thumb|thb|pollex"), ("index", r"index|ind|fore"), ("middle", r"middle|mid"),
-                ("ring", r"ring|rng"), ("little", r"pinky|pinkie|little|lit|small|pink"))
+_DIGIT_WORDS = (("thumb", r"thumb|thb|thm|tmb|pollex"), ("index", r"index|ind|idx|indx|fore"),
+                ("middle", r"middle|mid|mdl"), ("ring", r"ring|rng"),
+                ("little", r"pinky|pinkie|little|lit|small|pink|pnk|pky"))
 #: Words that say which segment, and the scan spots' bone endings they allow.
 _SEGMENT_WORDS = ((r"tip|nail|dist|dip", ("_dist",)), (r"pip", ("_mid",)), (r"mcp|prox", ("_prox",)),
                   (r"cmc|meta|knuckle", ("_meta",)), (r"middle|mid", ("_prox", "_mid")))
 #: Words of markers on the back of the hand or the wrist.
-_HAND_WORDS = r"hand|back|palm|wrist|wr[ab]?|fin$|rfin|lfin|dorsum"
+_HAND_WORDS = r"hand|hnd|back|palm|wrist|wr[ab]?|fin$|rfin|lfin|dorsum"
 
 
 def name_spots(name: str, scan: Layout) -> np.ndarray | None:
@@ -263,7 +282,8 @@ def fit_layout(observed: np.ndarray, names: list[str], *, name: str = "fitted", 
     markers = layout.markers
     layout = Layout(name, markers, layout.glove, f"fitted from {source} ({cal.side} hand, "
                                                 f"{1000 * cal.rms_after:.1f} mm RMS)")
-    return LayoutFit(layout, float(cal.rms_after), cal.side, [scan.names[s] for s in spots])
+    return LayoutFit(layout, float(cal.rms_after), cal.side, [scan.names[s] for s in spots],
+                     [n for n in names if name_spots(n, scan) is None])
 
 
 def hand_points(take: Take, *, side: str | None = None, naming: HandNaming | None = None,
