@@ -574,7 +574,7 @@ def test_label_a_body_take_is_an_error_and_builds_nothing(empty_scene, bpy_modul
 
 
 def test_label_warns_when_the_vote_hit_its_work_bound(empty_scene, bpy_module, take_file, monkeypatch, capfd):
-    """As the CLI and batch do ('the vote's exclusive assignment reached its bound of ... nodes')."""
+    """As the CLI and batch do ('the vote's exclusive assignment reached its work bound ...')."""
     from mocap_autolabel.core import pipeline, process
 
     real = pipeline.label_take
@@ -589,7 +589,7 @@ def test_label_warns_when_the_vote_hit_its_work_bound(empty_scene, bpy_module, t
     bpy_module.ops.mocap_autolabel.import_markers(filepath=str(take_file))
     assert bpy_module.ops.mocap_autolabel.label() == {"FINISHED"}
     out = capfd.readouterr()
-    assert "reached its bound of 1000 search nodes 2 time(s)" in out.out + out.err
+    assert "reached its work bound 2 time(s) (1000 search nodes" in out.out + out.err
 
 
 def test_gmm_labels_in_blender_without_a_fit_take(empty_scene, bpy_module, take_file):
