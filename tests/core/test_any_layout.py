@@ -277,3 +277,24 @@ def test_a_few_other_markers_beside_a_sparse_hand_are_no_second_hand():
     ok = take.valid & (truth >= 0)
     assert (per[ok] == truth[ok]).mean() > 0.9
     assert (per[:, -3:] < 0).all()  # the other markers stay null
+
+
+def test_nearest_given_another_recordings_labeled_take_says_why_it_cannot_start(tmp_path, capsys):
+    """``nearest --fit`` with a labeled take of the performer other than this one failed as "no hand
+    found ... is this a tips5_hand3 take?"; the take's own labeled version starts it."""
+    layout = load_layout("tips5_hand3")
+    take, other = tmp_path / "take.c3d", tmp_path / "other.c3d"
+    save_synth(synthesize(layout, 300, seed=3), str(take))
+    save_synth(synthesize(layout, 300, seed=9), str(other))
+    for raw in (take, other):
+        assert main(["label", str(raw), "--layout", "tips5_hand3", "-o", str(raw.with_suffix(".lab.c3d")),
+                     "--quiet"]) == 0
+    capsys.readouterr()
+    out = str(tmp_path / "o.c3d")
+    assert main(["label", str(take), "--layout", "tips5_hand3", "--method", "nearest",
+                 "--fit", str(other.with_suffix(".lab.c3d")), "-o", out]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --fit: nearest starts from the labeled first frame of this very take")
+    assert "no hand found" not in err and err.count("\n") == 0
+    assert main(["label", str(take), "--layout", "tips5_hand3", "--method", "nearest",
+                 "--fit", str(take.with_suffix(".lab.c3d")), "-o", out, "--quiet"]) == 0

@@ -191,7 +191,27 @@ class NearestMethod(LabelerMethod):
             start = np.full((len(layout), 3), np.nan)
             ok = labels[0] >= 0
             start[labels[0][ok]] = batch.points[first][ok]
+        else:
+            cls._check_start(start, batch)
         return cls.make(layout, start=start)
+
+    @staticmethod
+    def _check_start(start: np.ndarray, batch: FrameBatch) -> None:
+        """A given first frame must be this take's: the tracker takes each label's point within a
+        millimetre of it, so another recording's first frame labels nothing (and the no-hand rule then
+        blamed the take)."""
+        given = np.isfinite(start).all(axis=1)
+        points = batch.points[0][batch.mask[0]].astype(np.float64)
+        if not given.any():
+            raise MocapInputError("--fit", "the labeled take names none of the layout's markers in its first frame")
+        d = np.linalg.norm(points[:, None] - start[None, given], axis=2) if len(points) else np.full((0, 1), np.inf)
+        found = int((d.min(axis=0, initial=np.inf) < 1e-3).sum()) if len(points) else 0
+        if found * 2 < int(given.sum()):
+            raise MocapInputError("--fit", f"nearest starts from the labeled first frame of this very take, and this "
+                                           f"one's first frame holds only {found} of its {int(given.sum())} labeled "
+                                           f"markers within a millimetre (another recording?): give this take "
+                                           f"labeled (label it, correct its first frame, and pass that file), or use "
+                                           f"--method gmm, which fits on any take of the performer")
 
 
 #: The labeling methods by name, in the order the UI lists them; the first is the default.
