@@ -10,7 +10,7 @@ from __future__ import annotations
 import base64
 import html
 import io
-import json
+from urllib.parse import quote
 
 import numpy as np
 
@@ -128,6 +128,11 @@ def _e(value) -> str:
     return html.escape(str(value))
 
 
+def _href(path: str) -> str:
+    """A relative file link as an attribute value: percent-encoded (spaces, accents), then escaped."""
+    return html.escape(quote(path))
+
+
 def _queue_rows(queue: list[dict], segments: list[dict]) -> list[str]:
     """One table row per review queue entry: its rank, label, raw trajectory, frames (a link that shows them
     on the picture), length and confidence (of an unlabeled piece: how sure the vote is that it is no marker)."""
@@ -163,7 +168,7 @@ def take_page(report: dict, classes: np.ndarray, names: list[str], first_frame: 
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(name)}: mocap_autolabel report</title>"
              f"<style>{STYLE}</style><script>{FRAMES_JS}</script></head><body>"]
     if index:
-        parts.append(f"<p><a id='index' href='{_e(index)}'>&larr; all takes</a></p>")
+        parts.append(f"<p><a id='index' href='{_href(index)}'>&larr; all takes</a></p>")
     parts.append(f"<h1>{_e(name)}</h1><p>{_e(report.get('file', ''))}</p>")
     facts = [("layout", report.get("layout")), ("frames", report.get("frames")), ("rate", report.get("rate")),
              ("hands", report.get("hands")),
@@ -207,7 +212,7 @@ def take_page(report: dict, classes: np.ndarray, names: list[str], first_frame: 
     outputs = report.get("outputs", {})
     if outputs:
         parts.append("<h2>Files</h2><ul id='outputs'>" + "".join(
-            f"<li><a href='{_e(f)}'>{_e(f)}</a></li>" for f in outputs.values()) + "</ul>")
+            f"<li><a href='{_href(f)}'>{_e(f)}</a></li>" for f in outputs.values()) + "</ul>")
     parts.append("</body></html>")
     return "\n".join(parts)
 
@@ -224,7 +229,7 @@ def index_page(rows: list[dict], title: str = "Batch") -> str:
              "</tr></thead><tbody>"]
     for r in rows:
         page = r.get("page")
-        link = f"<a href='{_e(page)}'>{_e(r['name'])}</a>" if page else _e(r["name"])
+        link = f"<a href='{_href(page)}'>{_e(r['name'])}</a>" if page else _e(r["name"])
         conf = r.get("confident_share")
         rms = r.get("marker_rms_mm")
         problem = r.get("error") or r.get("warning") or ""
@@ -236,7 +241,8 @@ def index_page(rows: list[dict], title: str = "Batch") -> str:
                  ("1" if r.get("warning") else "", 1 if r.get("warning") else 0),
                  ("" if rms is None else f"{rms:.2f}", -1 if rms is None else rms),
                  (f"<span class='{'err' if r.get('error') else 'warn'}'>{_e(problem)}</span>", None)]
-        parts.append("<tr>" + "".join(f"<td data-v='{json.dumps(v)}' class='num'>{c}</td>" if v is not None
+        parts.append("<tr>" + "".join(f"<td data-v='{round(v, 6) if isinstance(v, float) else v}' class='num'>{c}</td>"
+                                      if v is not None
                                       else f"<td>{c}</td>" for c, v in cells) + "</tr>")
     parts.append("</tbody></table></body></html>")
     return "\n".join(parts)

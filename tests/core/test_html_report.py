@@ -196,3 +196,13 @@ def test_a_frames_link_boxes_those_frames_in_a_browser(tmp_path):
     assert box["left"] == pytest.approx(100 * (x0 + (x1 - x0) * 50 / 300), abs=0.01)
     assert box["width"] == pytest.approx(100 * (x1 - x0) * 30 / 300, abs=0.01)
     assert re.search(r'<tr data-frames="151-180" class="here">', done.stdout)
+
+
+def test_the_index_links_pages_of_any_name_and_sorts_by_plain_numbers():
+    """A trial's index held href='TAKE 14 é.report.html' unencoded and data-v='99.55000000000001'."""
+    from mocap_autolabel.html_report import index_page
+
+    page = index_page([{"name": "TAKE 14 é", "page": "TAKE 14 é.report.html", "status": "ok", "frames": 120,
+                        "hands": 1, "confident_share": 0.9955, "uncertain_segments": 3, "marker_rms_mm": None}])
+    assert "<a href='TAKE%2014%20%C3%A9.report.html'>TAKE 14 é</a>" in page
+    assert "data-v='99.55'" in page and "99.55000000000001" not in page
