@@ -103,7 +103,7 @@ class _OnnxMethod(LabelerMethod):
             path = shipped_model(cls.name, cls.any_layout_model)
         if model is None and not os.path.isfile(path):
             raise MocapInputError(path, f"'{cls.name}' needs a model trained for each layout, and none ships for "
-                                        f"'{layout.name}': label it with --method set (any layout), or train one "
+                                        f"'{layout.name}': label it with method set (any layout), or train one "
                                         f"with: python -m mocap_autolabel train --layout ... -o model.onnx")
         labeler = _loaded_onnx(path, layout, cache)
         if labeler.name != cls.name:
@@ -140,7 +140,7 @@ class GmmMethod(LabelerMethod):
         if labeler or hand >= cls.HAND_MARKERS:
             return None
         return (f"gmm (Alexanderson 2016) builds its hand frame from {cls.HAND_MARKERS} markers on the back of the "
-                f"hand or wrist (bone \"palm\"), and layout '{layout.name}' has {hand}: label it with --method set, "
+                f"hand or wrist (bone \"palm\"), and layout '{layout.name}' has {hand}: label it with method set, "
                 "which needs none")
 
     @classmethod
