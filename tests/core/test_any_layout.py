@@ -85,10 +85,10 @@ def test_gmm_says_in_one_line_why_a_layout_without_hand_markers_cannot_be_labele
     assert main(["label", str(take), "--layout", "tips5", "--method", "gmm", "-o", str(tmp_path / "o.c3d")]) == 1
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "three" not in err and "3 markers on the back of the hand" in err
-    assert "--method set" in err and not (tmp_path / "o.c3d").exists()
+    assert "label it with method set" in err and not (tmp_path / "o.c3d").exists()
     assert main(["label", str(take), "--layout", "tips5", "--method", "perm", "-o", str(tmp_path / "o.c3d")]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "needs a model trained for each layout" in err and "--method set" in err
+    assert err.count("\n") == 0 and "needs a model trained for each layout" in err and "method set (any layout)" in err
 
 
 def test_the_no_hand_rule_does_not_silence_gmm_on_a_take_it_labels():
