@@ -921,18 +921,24 @@ def run_batch(inputs: list[str], out_dir: str, settings: BatchSettings, progress
     rows.sort(key=lambda r: r["name"])
     failed = [r for r in rows if r["status"] == "failed"]
     frames = sum(r["frames"] or 0 for r in rows if not r["skipped"] and r["status"] == "ok")
+    # Takes of earlier runs whose outputs are in this folder but whose inputs this run was not given: listed
+    # apart, so that the summary and the index name everything the folder holds.
+    ours = {name for _, name in takes}
+    earlier = [_row({**report, "name": name}, skipped=True) | {"status": EARLIER}
+               for name, report in sorted(records.items()) if name not in ours]
     summary = {"takes": len(rows), "ok": sum(r["status"] == "ok" for r in rows), "failed": len(failed),
-               "skipped": sum(r["skipped"] for r in rows), "seconds": round(wall, 3),
+               "skipped": sum(r["skipped"] for r in rows), "earlier": len(earlier), "seconds": round(wall, 3),
                "frames_processed": frames, "frames_per_second": round(frames / wall, 1) if wall > 0 else None,
                "jobs": settings.jobs if not settings.scheduler else workers, "scheduler": settings.scheduler,
-               "settings": dataclasses.asdict(settings) | {"extra": None}, "takes_detail": rows}
+               "settings": dataclasses.asdict(settings) | {"extra": None}, "takes_detail": rows,
+               "earlier_detail": earlier}
     _write_summary(out_dir, summary)
     if settings.html:
         from .core.atomic import atomic_output
         from .html_report import index_page
 
         with atomic_output(os.path.join(out_dir, "index.html")) as tmp, open(tmp, "w", encoding="utf-8") as f:
-            f.write(index_page(rows, f"Batch: {os.path.abspath(out_dir)}"))
+            f.write(index_page(rows + earlier, f"Batch: {os.path.abspath(out_dir)}"))
     else:  # an earlier run's index would link pages this run removed
         with contextlib.suppress(FileNotFoundError):
             os.remove(os.path.join(out_dir, "index.html"))
@@ -1012,6 +1018,11 @@ def _finish(bar: Progress, report: dict) -> dict:
     return row
 
 
+#: The status of a take listed from an earlier run's report: its outputs are in the folder, its input was
+#: not among this run's.
+EARLIER = "earlier run"
+
+
 def _row(report: dict, skipped: bool) -> dict:
     summary = report.get("summary") or {}
     hand = report.get("hand") or {}
@@ -1049,7 +1060,7 @@ def _write_summary(out_dir: str, summary: dict) -> None:
             "marker_rms_mm", "retarget", "seconds", "error", "warning", "file"]
     writer = csv.DictWriter(buf, cols, extrasaction="ignore")
     writer.writeheader()
-    writer.writerows(summary["takes_detail"])
+    writer.writerows(summary["takes_detail"] + summary.get("earlier_detail", []))
     with atomic_output(os.path.join(out_dir, "summary.csv")) as tmp, open(tmp, "w", encoding="utf-8",
                                                                          newline="") as f:
         f.write(buf.getvalue())
@@ -1079,4 +1090,8 @@ def format_table(summary: dict) -> str:
                  f"{summary['frames_processed']:,} frames in {summary['seconds']:.1f} s " +
                  (f"on {summary['jobs']} Dask worker thread(s) ({summary['scheduler']})" if summary.get("scheduler")
                   else f"with {summary['jobs']} job(s)"))
+    earlier = [r["name"] for r in summary.get("earlier_detail", [])]
+    if earlier:
+        shown = ", ".join(earlier[:5]) + (f" and {len(earlier) - 5} more" if len(earlier) > 5 else "")
+        lines.append(f"also in the folder from earlier runs (their inputs are not among this run's): {shown}")
     return "\n".join(lines)

@@ -162,6 +162,24 @@ def test_an_output_folder_inside_the_inputs_is_not_labeled_again(tmp_path):
     assert named["ok"] == 1
 
 
+def test_a_take_whose_input_left_the_batch_is_still_listed_with_its_outputs(tmp_path):
+    """Outputs of a take whose input a rerun was not given stayed in the folder, unlisted by the summary."""
+    from mocap_autolabel.batch import format_table
+
+    takes, out = tmp_path / "takes", tmp_path / "out"
+    _synthetic(takes, 2)
+    assert run_batch([str(takes)], str(out), BatchSettings(), progress="none")["ok"] == 2
+    (takes / "synth1.c3d").unlink()
+    summary = run_batch([str(takes)], str(out), BatchSettings(), progress="none")
+    assert summary["takes"] == 1 and summary["earlier"] == 1
+    (row,) = summary["earlier_detail"]
+    assert row["name"] == "synth1" and row["status"] == "earlier run"
+    assert all((out / f).exists() for f in row["outputs"])
+    assert "synth1,earlier run," in (out / "summary.csv").read_text()
+    assert "also in the folder from earlier runs (their inputs are not among this run's): synth1" in \
+        format_table(summary)
+
+
 def test_batch_runs_as_a_blender_script(tmp_path):
     """The way `blender -b --python-exit-code 1 -P addon/mocap_autolabel/cli.py -- batch ...` runs it."""
     takes = tmp_path / "takes"
