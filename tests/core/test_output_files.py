@@ -187,3 +187,13 @@ def test_a_c3d_of_an_implausible_rate_is_refused_at_read_time(tmp_path):
     c.write(str(path))
     with pytest.raises(MocapInputError, match=r"slow.c3d: no usable frame rate .*expected 1 to 1,000,000"):
         read_take(path)
+
+
+def test_outputs_sent_to_a_device_are_written_in_place(raw, capsys):
+    """``--labels /dev/null`` raised struct.error from zipfile (a zip is sought back and forth); two
+    outputs may share a device."""
+    null = Path("/dev/null")
+    if not null.is_char_device():
+        pytest.skip("no /dev/null")
+    assert main(["label", str(raw), "--report", str(null), "--labels", str(null), "--quiet"]) == 0
+    assert "Traceback" not in capsys.readouterr().err

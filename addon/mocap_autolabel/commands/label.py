@@ -4,6 +4,7 @@ goes with them: the labeled C3D, fills, the solved hand, the review .blend, repo
 from __future__ import annotations
 
 import importlib.util
+import io
 import os
 import sys
 
@@ -170,9 +171,11 @@ def _label(args) -> int:
             _label_page(args, report, labeling, take.first_frame, filled, solved)
             print(f"  page     {args.html}")
         if args.labels:
+            packed = io.BytesIO()  # a zip is sought back and forth: built in memory, so a device takes it too
+            np.savez_compressed(packed, labels=labeling.per_sample(), confidence=labeling.per_sample_confidence(),
+                                names=np.array(labeling.names))
             with atomic_output(args.labels) as tmp, open(tmp, "wb") as fh:
-                np.savez_compressed(fh, labels=labeling.per_sample(), confidence=labeling.per_sample_confidence(),
-                                    names=np.array(labeling.names))
+                fh.write(packed.getvalue())
             print(f"  labels   {args.labels}")
     except OSError as exc:
         return _fail(args.file, exc)

@@ -97,13 +97,13 @@ def check_outputs(outputs: Sequence[str | os.PathLike | None], inputs: Sequence[
         real = os.path.realpath(path)
         if os.path.isdir(path):
             raise IsADirectoryError(errno.EISDIR, "is a folder; give a file name", path)
+        if os.path.exists(path) and not os.path.isfile(path):  # a device or pipe (/dev/null) is written in place
+            continue
         if real in read:
             raise OSError(errno.EEXIST, "is an input of this command; give another file name for the output", path)
         if real in seen:
             raise OSError(errno.EEXIST, "is given for two outputs; give each its own file name", path)
         seen.add(real)
-        if os.path.exists(path) and not os.path.isfile(path):  # a device or pipe is written in place
-            continue
         folder = os.path.dirname(os.path.abspath(path))
         if os.path.isdir(folder):
             _probed(path)
