@@ -33,6 +33,8 @@ def test_truncated_file(good_c3d, tmp_path):
     cut = tmp_path / "cut.c3d"
     cut.write_bytes(data[: len(data) - 3000])
     assert "truncated" in _error(cut)
+    cut.write_bytes(data[:100])  # within the header: it was called "not a C3D file"
+    assert "truncated C3D file: 100 bytes, shorter than its 512-byte header" in _error(cut)
 
 
 def test_truncated_real_file(tmp_path):
@@ -62,7 +64,7 @@ def test_random_bytes(tmp_path):
 def test_file_shorter_than_a_header(tmp_path):
     path = tmp_path / "short.c3d"
     path.write_bytes(b"\x02\x50\x00")
-    assert "not a C3D file" in _error(path)
+    assert "truncated C3D file: 3 bytes" in _error(path)  # it begins as a C3D header does
 
 
 def test_parameter_section_past_the_end(good_c3d, tmp_path):
