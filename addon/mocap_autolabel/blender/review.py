@@ -43,6 +43,7 @@ from ..core.review import (
     remap_review,
     uncertain_segments,
 )
+from ..core.stages.decide import RAW
 from ..core.take import Take
 from .lists import refresh_uncertain
 from .markers import (
@@ -277,7 +278,7 @@ def summary(labeling: Labeling, sure: float, first: int = 0) -> dict:
             # "uncalibrated": gmm or nearest on a layout without a calibration
             "never_confident": labeling.info.get("never_confident") or False,
             # set on a layout never calibrated: raw probabilities, seldom at the bar (see the CLI's note)
-            "raw_confidence": str(labeling.info.get("confidence", "")).startswith("raw")}
+            "raw_confidence": labeling.info.get("confidence") == RAW}
 
 
 def _props_line(props: list[dict]) -> str | None:

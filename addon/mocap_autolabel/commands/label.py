@@ -33,6 +33,7 @@ def _label(args) -> int:
     from ..core.layout import load_layout
     from ..core.process import Outputs, occlusion_note, performer_inputs, process_take, work_limit_warning
     from ..core.quiet import silenced_stdout
+    from ..core.stages.decide import RAW as RAW_CONFIDENCE
     from ..core.synth.truth import load_truth, truth_labels, truth_path
     from ..core.take import read_take
 
@@ -120,7 +121,7 @@ def _label(args) -> int:
     if labeling.info.get("never_confident") == "uncalibrated":
         print(f"  note     {args.method} has no confidence calibration for {layout.name}: its probabilities were never "
               f"measured against the truth there, so no segment is rated confident and every one is left for review")
-    elif str(labeling.info.get("confidence", "")).startswith("raw") and args.method == "set":
+    elif labeling.info.get("confidence") == RAW_CONFIDENCE and args.method == "set":
         print(f"  note     set has no confidence calibration for {layout.name} (a layout it was never calibrated on): "
               f"its confidences are the network's raw probabilities, which seldom reach the bar of confident, so "
               f"the confident share says little of how many labels are right; review the uncertain segments")

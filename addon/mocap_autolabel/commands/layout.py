@@ -26,8 +26,9 @@ def _layout(args) -> int:
     bar.close()
     print(f"wrote {args.output}: {len(fit.layout)} markers of a {fit.side} hand, calibration RMS "
           f"{1000 * fit.rms:.1f} mm")
-    if fit.doubt():
-        print(f"  warning  {fit.doubt()}")
+    doubt = fit.doubt()
+    if doubt:
+        print(f"  warning  {doubt}")
     for marker in fit.layout.markers:
         where = (f"along {marker.along:.2f}, across {marker.across:+.2f}" if marker.bone == "palm" else
                  f"along {marker.along:.2f}, {marker.angle_deg:+.0f} deg")

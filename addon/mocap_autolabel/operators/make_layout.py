@@ -60,8 +60,9 @@ class MOCAPAL_OT_make_layout(bpy.types.Operator, ExportHelper):
             wm.progress_end()
         self.report({"INFO"}, f"Wrote {path}: {len(fit.layout)} markers, {1000 * fit.rms:.1f} mm RMS; "
                               "it is now the Layout File")
-        if fit.doubt():
-            self.report({"WARNING"}, f"{path}: {fit.doubt()}")
+        doubt = fit.doubt()
+        if doubt:
+            self.report({"WARNING"}, f"{path}: {doubt}")
         return {"FINISHED"}
 
 

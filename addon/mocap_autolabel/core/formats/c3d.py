@@ -75,7 +75,7 @@ def read_c3d(path: str | os.PathLike) -> Take:
         raise MocapInputError(path, "file is empty (0 bytes)")
     with open(path, "rb") as fh:
         head = fh.read(BLOCK)
-        if len(head) < BLOCK and len(head) > 1 and head[1] == MAGIC:
+        if 1 < len(head) < BLOCK and head[1] == MAGIC:
             raise MocapInputError(path, f"truncated C3D file: {len(head)} bytes, shorter than its 512-byte header")
         if len(head) < BLOCK or head[1] != MAGIC:
             raise MocapInputError(path, "not a C3D file (no C3D header signature in the first 512 bytes)")

@@ -204,8 +204,10 @@ class NearestMethod(LabelerMethod):
         points = batch.points[0][batch.mask[0]].astype(np.float64)
         if not given.any():
             raise MocapInputError("--fit", "the labeled take names none of the layout's markers in its first frame")
-        d = np.linalg.norm(points[:, None] - start[None, given], axis=2) if len(points) else np.full((0, 1), np.inf)
-        found = int((d.min(axis=0, initial=np.inf) < 1e-3).sum()) if len(points) else 0
+        found = 0
+        if len(points):
+            d = np.linalg.norm(points[:, None] - start[None, given], axis=2)  # (points, labeled markers)
+            found = int((d.min(axis=0) < 1e-3).sum())
         if found * 2 < int(given.sum()):
             raise MocapInputError("--fit", f"nearest starts from the labeled first frame of this very take, and this "
                                            f"one's first frame holds only {found} of its {int(given.sum())} labeled "

@@ -232,8 +232,10 @@ def null_prior(info: dict) -> tuple[float, float]:
     return per_tracklet, per_sample - slope * max(0.0, info["break_rate"] - knee)
 
 
-#: ``info["confidence"]`` of a labeling whose confidences went through a shipped calibration.
+#: ``info["confidence"]`` of a labeling whose confidences went through a shipped calibration, and of one
+#: whose confidences are the labeler's raw probabilities (no calibration for its method and layout).
 CALIBRATED = "calibrated"
+RAW = "raw (no calibration for this method)"
 
 
 def calibrate_confidence(run: LabelRun, labeling: Labeling, samples: Samples) -> Labeling:
@@ -244,7 +246,7 @@ def calibrate_confidence(run: LabelRun, labeling: Labeling, samples: Samples) ->
     labeling.evidence = segment_evidence(labeling, samples)
     labeling.confidence = labeling.evidence[:, 0].copy()  # the mean probability, until calibrated
     calibration = load_calibration(s.method, s.temporal, run.layout.name) if s.calibrate_confidence else None
-    run.info["confidence"] = "raw (no calibration for this method)"
+    run.info["confidence"] = RAW
     if calibration is not None:
         labeling.confidence = calibration(labeling.evidence, labeled=labeling.label >= 0)
         run.info["confidence"] = CALIBRATED
